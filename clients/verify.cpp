@@ -1,0 +1,253 @@
+// palpate-verify: presses the scene's indenter with each force of a sweep, lets
+// the body come to rest (physics.md §2) and compares the indentation with Hertz
+// theory, plain and corrected for the finite layer (physics.md §3).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/hertz.h"
+#include "core/indentation.h"
+#include "core/model.h"
+#include "core/scene.h"
+#include "core/state.h"
+#include "core/step.h"
+
+namespace {
+
+using namespace palpate;
+
+const char* kUsage = R"(usage: palpate-verify --scene FILE [options]
+Presses the indenter with each force of a sweep until the body is at rest and
+compares the indentation d with Hertz theory.
+  --scene FILE        scene file (JSON), e.g. scenes/hertz_cube.json
+  --per-edge N        override body.distribution.per_edge
+  --forces F1,F2,...  force sweep in N (default: the scene's verify.forces, or the
+                      loads of Hertz depths 0.01 ... 0.1 m)
+  --set KEY=VALUE     override a scene field by its dotted path (repeatable),
+                      e.g. --set integrator.type=implicit_euler
+  --json              print one JSON summary on stdout (progress stays on stderr)
+  --csv FILE          write the rows as CSV
+  --quiet             no progress on stderr
+  --trace SECONDS     print the state every SECONDS of simulated time (stderr)
+  --log-level LEVEL   spdlog level (default: warn)
+Indentation d: travel of the indenter centre below the height at which the sphere
+first touches the undeformed body. Errors: (d_sim - d_ref) / d_ref; the L2 error
+is ||d_sim - d_ref|| / ||d_ref|| over the sweep.
+)";
+
+struct Row {
+  double force = 0, d_sim = NAN, d_hertz = 0, d_layer = 0;
+  double contact_force = 0;
+  long steps = 0;
+  double sim_time = 0, wall_seconds = 0;
+  bool at_rest = false;
+  std::string status = "ok";
+};
+
+std::vector<double> parse_list(const std::string& text) {
+  std::vector<double> values;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    size_t used = 0;
+    double v = std::stod(item, &used);
+    if (used != item.size() || !std::isfinite(v) || v <= 0)
+      throw std::invalid_argument("--forces: '" + item + "' is not a positive number");
+    values.push_back(v);
+  }
+  if (values.empty()) throw std::invalid_argument("--forces: empty list");
+  return values;
+}
+
+double l2_error(const std::vector<Row>& rows, double Row::*ref) {
+  double num = 0, den = 0;
+  for (const Row& r : rows) {
+    if (!std::isfinite(r.d_sim)) return NAN;
+    num += (r.d_sim - r.*ref) * (r.d_sim - r.*ref);
+    den += (r.*ref) * (r.*ref);
+  }
+  return std::sqrt(num / den);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene_file, csv_file, log_level = "warn";
+  SceneOverrides overrides;
+  std::vector<double> forces;
+  bool json = false, quiet = false;
+  double trace_interval = 0;
+  try {
+    for (int a = 1; a < argc; ++a) {
+      const std::string arg = argv[a];
+      auto value = [&]() -> std::string {
+        if (a + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
+        return argv[++a];
+      };
+      if (arg == "--scene") scene_file = value();
+      else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
+      else if (arg == "--forces") forces = parse_list(value());
+      else if (arg == "--set") {
+        const std::string kv = value();
+        const auto eq = kv.find('=');
+        if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--set expects KEY=VALUE, got '" + kv + "'");
+        overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+      } else if (arg == "--json") json = true;
+      else if (arg == "--csv") csv_file = value();
+      else if (arg == "--quiet") quiet = true;
+      else if (arg == "--trace") trace_interval = std::stod(value());
+      else if (arg == "--log-level") log_level = value();
+      else if (arg == "--help" || arg == "-h") {
+        std::cout << kUsage;
+        return 0;
+      } else throw std::invalid_argument("unknown option '" + arg + "'");
+    }
+    if (scene_file.empty()) throw std::invalid_argument("--scene FILE is required");
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-verify: " << e.what() << "\n\n" << kUsage;
+    return 2;
+  }
+  spdlog::set_level(spdlog::level::from_str(log_level));
+
+  Scene scene;
+  Model model;
+  try {
+    scene = load_scene(scene_file, overrides);
+    model = build_model(scene);
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-verify: " << e.what() << "\n";
+    return 1;
+  }
+
+  const MaterialSpec& mat = scene.material;
+  const double R = model.indenter_radius;
+  const double E_star = hertz::effective_modulus(mat.young_modulus, mat.poisson_ratio);
+  const double thickness = scene.box.max[2] - scene.box.min[2];
+  if (forces.empty()) forces = scene.verify.forces;
+  if (forces.empty())
+    for (int k = 1; k <= 10; ++k) forces.push_back(hertz::force(0.01 * k, R, E_star));
+
+  if (!quiet)
+    std::fprintf(stderr,
+                 "palpate-verify: %s, %d particles (%d fixed, %d regularised), sum of volumes %.4g m^3 "
+                 "(box %.4g), %s dt = %g s, damping %g 1/s\n",
+                 scene.name.c_str(), model.particle_count, model.fixed_count, model.regularized_count,
+                 model.total_volume, model.box_volume, to_string(scene.integrator.type), scene.integrator.dt,
+                 scene.integrator.damping);
+
+  State state = make_state(model);
+  std::vector<Row> rows;
+  for (size_t k = 0; k < forces.size(); ++k) {
+    Row row;
+    row.force = forces[k];
+    row.d_hertz = hertz::depth(row.force, R, E_star);
+    try {
+      row.d_layer = hertz::depth_finite_layer(row.force, R, mat.young_modulus, mat.poisson_ratio, thickness);
+    } catch (const std::domain_error&) {
+      row.d_layer = NAN;
+    }
+    state.force_command = row.force;
+    RestMonitor rest(scene.verify.rest);
+    const auto start = std::chrono::steady_clock::now();
+    const double t0 = state.time;
+    const long max_steps = static_cast<long>(std::ceil(scene.verify.rest.max_time / scene.integrator.dt));
+    for (long s = 0; s < max_steps; ++s) {
+      const StepStatus status = step(model, state);
+      ++row.steps;
+      if (status == StepStatus::non_finite) {
+        row.status = "diverged";
+        break;
+      }
+      if (trace_interval > 0 && row.steps % std::max(1L, std::lround(trace_interval / scene.integrator.dt)) == 0)
+        std::fprintf(stderr, "    t = %8.3f s  d = %.6f m  contact %9.4f N (%zu particles)  v_ind = %+.2e  max v = %.2e m/s\n",
+                     state.time, indentation(model, state), state.indenter_contact_force, state.contact_index.size(),
+                     state.indenter_velocity, max_particle_speed(state));
+      if (rest.update(model, state)) {
+        row.at_rest = true;
+        break;
+      }
+    }
+    row.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    row.sim_time = state.time - t0;
+    if (row.status == "diverged") {
+      state = make_state(model);  // start the next force from the rest state
+    } else {
+      row.d_sim = indentation(model, state);
+      row.contact_force = state.indenter_contact_force;
+      if (!row.at_rest) row.status = "not at rest";
+    }
+    rows.push_back(row);
+    if (!quiet)
+      std::fprintf(stderr, "  [%zu/%zu] F = %8.3f N  d = %.5f m  (Hertz %.5f)  %ld steps, %.2f s  %s\n", k + 1,
+                   forces.size(), row.force, row.d_sim, row.d_hertz, row.steps, row.wall_seconds,
+                   row.status.c_str());
+  }
+
+  const double l2_hertz = l2_error(rows, &Row::d_hertz);
+  const double l2_layer = l2_error(rows, &Row::d_layer);
+  bool all_ok = true;
+  for (const Row& r : rows) all_ok = all_ok && r.status == "ok";
+
+  if (!csv_file.empty()) {
+    std::ofstream csv(csv_file);
+    csv << "force_N,d_sim_m,d_hertz_m,d_layer_m,err_hertz,err_layer,contact_force_N,steps,sim_time_s,wall_s,status\n";
+    for (const Row& r : rows)
+      csv << r.force << ',' << r.d_sim << ',' << r.d_hertz << ',' << r.d_layer << ','
+          << (r.d_sim - r.d_hertz) / r.d_hertz << ',' << (r.d_sim - r.d_layer) / r.d_layer << ','
+          << r.contact_force << ',' << r.steps << ',' << r.sim_time << ',' << r.wall_seconds << ',' << r.status
+          << '\n';
+  }
+
+  if (json) {
+    nlohmann::json out;
+    out["scene"] = scene.name;
+    out["particles"] = model.particle_count;
+    out["fixed_particles"] = model.fixed_count;
+    out["regularized_particles"] = model.regularized_count;
+    out["total_volume"] = model.total_volume;
+    out["box_volume"] = model.box_volume;
+    out["integrator"] = to_string(scene.integrator.type);
+    out["dt"] = scene.integrator.dt;
+    out["neighbors"] = scene.mls.neighbors;
+    out["support_factor"] = scene.mls.support_factor;
+    auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    out["l2_error_hertz"] = num(l2_hertz);
+    out["l2_error_finite_layer"] = num(l2_layer);
+    out["all_at_rest"] = all_ok;
+    nlohmann::json list = nlohmann::json::array();
+    for (const Row& r : rows)
+      list.push_back({{"force", r.force},
+                      {"d_sim", num(r.d_sim)},
+                      {"d_hertz", r.d_hertz},
+                      {"d_finite_layer", num(r.d_layer)},
+                      {"error_hertz", num((r.d_sim - r.d_hertz) / r.d_hertz)},
+                      {"error_finite_layer", num((r.d_sim - r.d_layer) / r.d_layer)},
+                      {"contact_force", r.contact_force},
+                      {"steps", r.steps},
+                      {"sim_time", r.sim_time},
+                      {"wall_seconds", r.wall_seconds},
+                      {"status", r.status}});
+    out["rows"] = list;
+    std::cout << out.dump(2) << "\n";
+  } else {
+    std::printf("\nHertz indentation, scene %s: %d particles, k = %d, alpha = %g, %s dt = %g s\n", scene.name.c_str(),
+                model.particle_count, scene.mls.neighbors, scene.mls.support_factor, to_string(scene.integrator.type),
+                scene.integrator.dt);
+    std::printf("%10s %10s %10s %10s %9s %9s %8s %9s  %s\n", "F [N]", "d_sim [m]", "d_Hertz", "d_layer",
+                "err_H", "err_layer", "steps", "wall [s]", "status");
+    for (const Row& r : rows)
+      std::printf("%10.3f %10.5f %10.5f %10.5f %8.1f%% %8.1f%% %8ld %9.2f  %s\n", r.force, r.d_sim, r.d_hertz,
+                  r.d_layer, 100 * (r.d_sim - r.d_hertz) / r.d_hertz, 100 * (r.d_sim - r.d_layer) / r.d_layer,
+                  r.steps, r.wall_seconds, r.status.c_str());
+    std::printf("L2 error against Hertz: %.2f %%, against finite-layer Hertz: %.2f %%\n", 100 * l2_hertz,
+                100 * l2_layer);
+  }
+  return all_ok ? 0 : 3;
+}

@@ -1,0 +1,202 @@
+// Model construction: node cloud -> support domains -> MLS precomputation
+// (masses, volumes, moment matrices, gradient weights d_j) -> boundary
+// conditions -> indenter placement. Everything that depends only on the
+// reference configuration is computed here, once.
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <numeric>
+#include <spdlog/spdlog.h>
+
+#include "core/boundary.h"
+#include "core/kernel.h"
+#include "core/model.h"
+#include "core/neighbors.h"
+#include "core/node_cloud.h"
+
+namespace palpate {
+
+namespace {
+
+// Robust inverse of a symmetric positive semi-definite moment matrix: eigenvalues
+// below `floor_ratio * largest` are raised to that floor. Returns true when it had to.
+bool regularized_inverse(const Mat3& A, double floor_ratio, Mat3& A_inv, double& condition) {
+  Eigen::SelfAdjointEigenSolver<Mat3> eig(A);
+  Vec3 ev = eig.eigenvalues();  // ascending
+  const double largest = ev[2];
+  condition = ev[0] > 0 ? largest / ev[0] : INFINITY;
+  const double floor = std::max(floor_ratio * largest, 1e-300);
+  bool raised = false;
+  for (int c = 0; c < 3; ++c)
+    if (ev[c] < floor) {
+      ev[c] = floor;
+      raised = true;
+    }
+  A_inv = eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
+  return raised;
+}
+
+// Height of the indenter centre when the sphere (centre above (cx, cy)) first
+// touches a particle of the undeformed body.
+double first_touch_height(const Points& X, double cx, double cy, double radius) {
+  double top = -INFINITY;
+  for (Eigen::Index i = 0; i < X.cols(); ++i) {
+    const double r2 = (X(0, i) - cx) * (X(0, i) - cx) + (X(1, i) - cy) * (X(1, i) - cy);
+    if (r2 < radius * radius) top = std::max(top, X(2, i) + std::sqrt(radius * radius - r2));
+  }
+  return top;
+}
+
+}  // namespace
+
+Model build_model(const Scene& scene) {
+  if (scene.model != "mls") throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
+  Model m;
+  m.scene = scene;
+  const NodeCloud cloud = make_node_cloud(scene);
+  const int n = static_cast<int>(cloud.positions.cols());
+  const int k = scene.mls.neighbors;
+  if (k >= n)
+    throw SceneError(scene.source, "/mls/neighbors",
+                     "k = " + std::to_string(k) + " needs more particles than the cloud's " + std::to_string(n));
+  m.particle_count = n;
+  m.rest_position = cloud.positions;
+  const Points& X = m.rest_position;
+
+  const Neighborhoods nb = k_nearest_neighbors(X, k);
+
+  // Support radius h_i = alpha * mean distance to the k neighbours (physics.md §1).
+  std::vector<double> mean_distance(n);
+  m.support_radius.resize(n);
+  m.min_spacing = INFINITY;
+  for (int i = 0; i < n; ++i) {
+    double sum = 0;
+    for (int a = nb.offset[i]; a < nb.offset[i + 1]; ++a) sum += std::sqrt(nb.dist2[a]);
+    mean_distance[i] = sum / k;
+    m.support_radius[i] = scene.mls.support_factor * mean_distance[i];
+    m.min_spacing = std::min(m.min_spacing, std::sqrt(nb.dist2[nb.offset[i]]));
+  }
+
+  // Keep only neighbours inside the support (non-zero weight): the rest contribute nothing.
+  m.neighbor_offset.assign(n + 1, 0);
+  std::vector<double> weight;
+  for (int i = 0; i < n; ++i) {
+    const double h2 = m.support_radius[i] * m.support_radius[i];
+    for (int a = nb.offset[i]; a < nb.offset[i + 1]; ++a) {
+      const double w = kernel_weight(nb.dist2[a], h2);
+      if (w <= 0) continue;
+      m.neighbor_index.push_back(nb.index[a]);
+      weight.push_back(w);
+    }
+    m.neighbor_offset[i + 1] = static_cast<int>(m.neighbor_index.size());
+  }
+  const int nnz = m.neighbor_offset[n];
+
+  // Masses, densities, volumes.
+  const double rho = scene.material.density;
+  m.mass.resize(n);
+  m.volume.resize(n);
+  if (scene.mls.volumes == VolumeRule::lattice) {
+    if (cloud.lattice_volume.empty())
+      throw SceneError(scene.source, "/mls/volumes", "lattice volumes need a lattice distribution");
+    for (int i = 0; i < n; ++i) {
+      m.volume[i] = cloud.lattice_volume[i];
+      m.mass[i] = rho * m.volume[i];
+    }
+  } else {
+    // m_i = s rbar_i^3 rho, rho_i = sum_j m_j W(r_ij, h_i) (self included), s such that
+    // the mean of rho_i is rho; v_i = m_i / rho_i.
+    std::vector<double> density(n);
+    for (int i = 0; i < n; ++i) {
+      const double h = m.support_radius[i];
+      double sum = std::pow(mean_distance[i], 3) * kernel_density(0.0, h);
+      for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+        const int j = m.neighbor_index[a];
+        sum += std::pow(mean_distance[j], 3) * kernel_density((X.col(j) - X.col(i)).squaredNorm(), h);
+      }
+      density[i] = rho * sum;  // with s = 1
+    }
+    const double s = rho / (std::accumulate(density.begin(), density.end(), 0.0) / n);
+    for (int i = 0; i < n; ++i) {
+      m.mass[i] = s * std::pow(mean_distance[i], 3) * rho;
+      m.volume[i] = m.mass[i] / (s * density[i]);
+    }
+  }
+  m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
+  m.box_volume = (scene.box.max - scene.box.min).prod();
+
+  // Moment matrices and gradient weights (A-6 ... A-9, M-14, M-15):
+  // A_i = sum_j w_ij x_ij x_ij^T, d_j = A_i^-1 x_ij w_ij.
+  m.gradient_weight.resize(3, nnz);
+  m.rest_correction.assign(9 * static_cast<size_t>(n), 0.0);
+  std::vector<double> moment_trace(n);
+  for (int i = 0; i < n; ++i) {
+    Mat3 A = Mat3::Zero();
+    for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+      const Vec3 x_ij = X.col(m.neighbor_index[a]) - X.col(i);
+      A += weight[a] * x_ij * x_ij.transpose();
+    }
+    moment_trace[i] = A.trace();
+    Mat3 A_inv;
+    double condition;
+    if (regularized_inverse(A, scene.mls.regularization, A_inv, condition)) ++m.regularized_count;
+    m.worst_condition = std::max(m.worst_condition, condition);
+    Mat3 B = Mat3::Zero();  // sum_j X_ij d_j^T: I unless A_i was regularised
+    for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+      const Vec3 x_ij = X.col(m.neighbor_index[a]) - X.col(i);
+      m.gradient_weight.col(a) = A_inv * x_ij * weight[a];
+      B += x_ij * m.gradient_weight.col(a).transpose();
+    }
+    Eigen::Map<Mat3> correction(&m.rest_correction[9 * static_cast<size_t>(i)]);
+    correction = Mat3::Identity() - B;
+  }
+
+  // Material (Lame parameters from E, nu).
+  const MaterialSpec& mat = scene.material;
+  m.lame_lambda = mat.young_modulus * mat.poisson_ratio / ((1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio));
+  m.lame_mu = mat.young_modulus / (2 * (1 + mat.poisson_ratio));
+  m.volume_stiffness = mat.volume_stiffness;
+  m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / rho);
+
+  // Hourglass control: kappa_i = c * 2 mu * v_i / tr(A_i), per neighbour kappa_i w_ij.
+  if (scene.mls.hourglass > 0) {
+    m.hourglass_weight.resize(nnz);
+    m.neighbor_rest_offset.resize(3, nnz);
+    for (int i = 0; i < n; ++i) {
+      const double kappa = scene.mls.hourglass * 2 * m.lame_mu * m.volume[i] / moment_trace[i];
+      for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+        m.hourglass_weight[a] = kappa * weight[a];
+        m.neighbor_rest_offset.col(a) = X.col(m.neighbor_index[a]) - X.col(i);
+      }
+    }
+  }
+
+  // Boundary conditions.
+  m.fixed = particles_on_faces(X, scene.fixed_faces);
+  m.inverse_mass.resize(n);
+  for (int i = 0; i < n; ++i) {
+    m.inverse_mass[i] = m.fixed[i] ? 0.0 : 1.0 / m.mass[i];
+    m.fixed_count += m.fixed[i];
+  }
+
+  // Indenter: centred over the top face and just touching it unless placed by the scene.
+  m.indenter_radius = scene.indenter.radius;
+  m.indenter_mass = scene.indenter.mass;
+  const Vec3 centre_xy = 0.5 * (X.rowwise().minCoeff() + X.rowwise().maxCoeff());
+  m.indenter_start = scene.indenter.position_given ? scene.indenter.position
+                                                   : Vec3(centre_xy[0], centre_xy[1], 0.0);
+  m.touch_height = first_touch_height(X, m.indenter_start[0], m.indenter_start[1], m.indenter_radius);
+  if (!std::isfinite(m.touch_height))
+    throw SceneError(scene.source, "/indenter/position", "the indenter is not above the body");
+  if (!scene.indenter.position_given) m.indenter_start[2] = m.touch_height;
+  if (m.indenter_start[2] < m.touch_height - 1e-12)
+    throw SceneError(scene.source, "/indenter/position",
+                     "the indenter starts inside the body (its centre must be at z >= " +
+                         std::to_string(m.touch_height) + ")");
+
+  spdlog::debug("model: {} particles, {} neighbour pairs, {} fixed, {} regularised (worst cond {:.3g}), "
+                "volume {:.4g} of box {:.4g}",
+                n, nnz, m.fixed_count, m.regularized_count, m.worst_condition, m.total_volume, m.box_volume);
+  return m;
+}
+
+}  // namespace palpate

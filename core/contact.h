@@ -1,0 +1,44 @@
+#pragma once
+// Frictionless unilateral contact between the rigid sphere indenter and the
+// particles, with Lagrange multipliers (physics.md §2).
+//
+// After the integrator's free motion (no contact forces), two projections:
+// 1. Positions. The gaps g_i = |x_i - c| - R of the candidate particles (negative
+//    free gap) are linearised in the multipliers lambda and the sphere's vertical
+//    motion: g' = g + W lambda, W = dt^2 J M^-1 J^T with the sphere's column
+//    included (the Delassus operator). The linear complementarity problem
+//    lambda >= 0, g' >= 0, lambda . g' = 0 (Signorini) is solved exactly by
+//    principal pivoting on the small dense W (projected Gauss-Seidel finishes if
+//    pivoting does not settle); x += dt^2 M^-1 J^T lambda.
+// 2. Velocities. For the particles touching after (1), the relative normal
+//    velocities u = J v must not approach: u' = u + (W / dt) mu >= 0, mu >= 0,
+//    mu . u' = 0; v += dt M^-1 J^T mu. mu (N) is the contact force of the step
+//    (momentum exchanged / dt) and is what the state reports.
+// Both are M-metric projections, so momentum is conserved and the rest state is a
+// fixed point of every integrator (the free motion pushes in, the projections
+// push back exactly). For implicit Euler, M is replaced by the step operator A.
+#include "core/model.h"
+#include "core/state.h"
+
+namespace palpate {
+
+// The coupled response of an implicit step: out = A^-1 load over the free DOFs.
+class LinearResponse {
+ public:
+  virtual ~LinearResponse() = default;
+  virtual void solve(const Points& load, Points& out) = 0;
+};
+
+// Solves and applies the contact of one step. With coupled == nullptr the
+// particles respond through their lumped inverse masses (explicit integrators). Returns
+// contact_not_converged when neither pivoting nor projected Gauss-Seidel met the
+// tolerance (the best multipliers found are still applied).
+StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupled = nullptr);
+
+// Solves the LCP  w = g + W lambda, lambda >= 0, w >= -tolerance, lambda . w = 0 for a
+// symmetric positive definite W (m x m, row-major). Returns the number of pivots
+// (or sweeps) used, or -1 when it did not converge. Scratch comes from `work`.
+int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda, double tolerance,
+                        int max_iterations, Workspace& work);
+
+}  // namespace palpate

@@ -1,0 +1,50 @@
+#pragma once
+// Time integrators: the free motion of one step (elastic, damping, gravity and
+// the commanded indenter force); contact is projected afterwards by solve_contact.
+#include "core/contact.h"
+#include "core/model.h"
+#include "core/state.h"
+
+namespace palpate {
+
+// The free motion carries the contact forces of the previous step as external
+// forces held over the step; the contact projections then correct them to the
+// forces of this step (solve_contact). At rest nothing needs correcting, so the
+// rest state of every integrator is the static equilibrium.
+
+// force += the contact forces of state (previous step) on their particles.
+void add_contact_forces(const State& state, Points& force);
+
+// a = M^-1 (f_int(x) + f_contact + m g) - c v for the particles (zero for fixed
+// ones); writes 3 x n. f_contact from state's previous contact forces.
+void particle_accelerations(const Model& model, const State& state, const Points& x, const Points& v,
+                            Points& force_scratch, Points& acceleration);
+
+// Indenter acceleration along z: (F_contact,previous - F_command) / M + g_z.
+double indenter_free_acceleration(const Model& model, const State& state);
+
+// Classical fourth-order Runge-Kutta on (x, v) (the paper's integrator).
+void free_motion_rk4(const Model& model, State& state);
+// Symplectic (semi-implicit) Euler: v += dt a(x, v); x += dt v.
+void free_motion_symplectic_euler(const Model& model, State& state);
+// The step operator of linearly implicit Euler, A = (1 + dt c) M + dt^2 K over the
+// free particles, K the tangent stiffness cached in state.work by linearize_forces.
+// It is also the coupled response of the contact solve of that step.
+class ImplicitEulerOperator final : public LinearResponse {
+ public:
+  ImplicitEulerOperator(const Model& model, State& state);
+  void apply(const Points& p, Points& Ap);
+  // Jacobi-preconditioned CG for A x = b; iterations used, -1 if not converged.
+  int conjugate_gradient(const Points& b, Points& x);
+  void solve(const Points& load, Points& out) override;
+
+ private:
+  const Model& model_;
+  State& state_;
+};
+
+// Linearly implicit Euler (one Newton step, Baraff-Witkin form):
+// [(1 + dt c) M + dt^2 K] dv = dt (f + M g - c M v) - dt^2 K v;  v += dv; x += dt v.
+void free_motion_implicit_euler(const Model& model, State& state);
+
+}  // namespace palpate

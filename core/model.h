@@ -1,0 +1,62 @@
+#pragma once
+// The constant Model: the reference configuration and everything precomputed
+// from it. Built once from a Scene (build_model); never changed by a step.
+// Shapes: n = particle_count, nnz = total number of weighted neighbours.
+#include <cstdint>
+#include <vector>
+
+#include "core/scene.h"
+#include "core/types.h"
+
+namespace palpate {
+
+struct Model {
+  Scene scene;  // the description this model was built from
+
+  int particle_count = 0;
+  Points rest_position;  // 3 x n, X_i, m
+
+  // Support domains, CSR (neighbours with non-zero weight only; the particle itself excluded).
+  std::vector<int> neighbor_offset;      // n+1
+  std::vector<int> neighbor_index;       // nnz
+  Points gradient_weight;                // 3 x nnz, d_j = A_i^-1 x_ij w_ij; d_i = -sum_j d_j is implied
+  std::vector<double> rest_correction;   // 9 x n (column-major 3x3 per particle): I - sum_j X_ij d_j^T,
+                                         // zero unless A_i was regularised; makes F(X) = I exactly
+  std::vector<double> support_radius;    // n, h_i = alpha * mean neighbour distance, m
+
+  // Mass and volume.
+  std::vector<double> mass;              // n, kg
+  std::vector<double> inverse_mass;      // n, 1/kg; 0 for fixed particles (projected boundary condition)
+  std::vector<double> volume;            // n, v_i, m^3
+  std::vector<uint8_t> fixed;            // n, 1 = fixed particle
+  int fixed_count = 0;
+
+  // Hourglass control (empty when scene.mls.hourglass == 0).
+  std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
+  Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)
+
+  // Material.
+  double lame_lambda = 0.0;       // Pa
+  double lame_mu = 0.0;           // Pa
+  double volume_stiffness = 0.0;  // k_v, Pa
+
+  // Indenter.
+  double indenter_radius = 0.0;   // m
+  double indenter_mass = 0.0;     // kg
+  Vec3 indenter_start{0, 0, 0};   // initial centre, m
+  double touch_height = 0.0;      // z of the centre when it first touches the undeformed body, m
+
+  // Diagnostics of the build.
+  int regularized_count = 0;      // particles whose moment matrix needed regularisation
+  double worst_condition = 0.0;   // largest cond(A_i) before regularisation
+  double total_volume = 0.0;      // sum v_i, m^3 (compare with box_volume)
+  double box_volume = 0.0;        // m^3
+  double min_spacing = 0.0;       // smallest nearest-neighbour distance, m
+  double wave_speed = 0.0;        // p-wave speed sqrt((lambda + 2 mu) / rho), m/s
+};
+
+// Builds the model a scene describes. Throws SceneError / std::runtime_error
+// with an actionable message on a scene that cannot be built.
+Model build_model(const Scene& scene);
+
+}  // namespace palpate

@@ -1,0 +1,33 @@
+#pragma once
+// Node distributions: where the particles of the meshless solid sit in the
+// reference configuration.
+#include <filesystem>
+#include <vector>
+
+#include "core/scene.h"
+#include "core/types.h"
+
+namespace palpate {
+
+struct NodeCloud {
+  Points positions;                   // 3 x n reference positions X_i, m
+  std::vector<double> lattice_volume; // n geometric cell volumes (lattices only; else empty), m^3
+  Eigen::Vector3i lattice_size{0, 0, 0};  // nodes per axis for lattices, 0 otherwise
+};
+
+// Regular lattice with `per_axis` nodes along each box axis, corners included.
+NodeCloud grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis);
+// Nodes per axis for a target spacing: round(edge / spacing) + 1 on each axis.
+Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing);
+// The lattice with every node displaced by a seeded uniform random offset of at
+// most jitter * spacing per component; nodes on a face stay on it.
+NodeCloud jittered_grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis, double jitter,
+                              uint64_t seed);
+// Plain node list: "x y z" per line; blank lines and lines starting with '#' are
+// skipped. Throws std::runtime_error naming file, line and reason.
+NodeCloud load_node_list(const std::filesystem::path& file);
+
+// The cloud a scene names (grid, jittered_grid or node_file).
+NodeCloud make_node_cloud(const Scene& scene);
+
+}  // namespace palpate

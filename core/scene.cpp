@@ -1,0 +1,574 @@
+// Scene files: JSON -> plain structs, validated field by field (docs/scene-format.md).
+//
+// A Reader pairs a JSON value with its JSON pointer, so every accessor reports the
+// path of the value it rejects. Sections are read in document order and the first
+// error is thrown as a SceneError(source, pointer, reason).
+#include "core/scene.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <initializer_list>
+#include <limits>
+#include <memory>
+#include <string_view>
+#include <system_error>
+
+#include <nlohmann/json.hpp>
+
+namespace palpate {
+
+namespace fs = std::filesystem;
+
+SceneError::SceneError(const std::string& source, const std::string& field, const std::string& reason)
+    : std::runtime_error(source + ": " + (field.empty() ? std::string() : field + ": ") + reason),
+      source_(source),
+      field_(field),
+      reason_(reason) {}
+
+namespace {
+
+using json = nlohmann::json;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// ---------------------------------------------------------------------------
+// Names of enumerated values: the single list used by parsing, messages and to_string.
+
+template <class T>
+struct Named {
+  std::string_view name;
+  T value;
+};
+
+constexpr std::string_view kModels[] = {"mls"};  // a later issue adds "hex_fem"
+
+constexpr Named<DistributionType> kDistributions[] = {
+    {"grid", DistributionType::grid},
+    {"jittered_grid", DistributionType::jittered_grid},
+    {"node_file", DistributionType::node_file},
+};
+
+constexpr Named<VolumeRule> kVolumeRules[] = {
+    {"kernel", VolumeRule::kernel},
+    {"lattice", VolumeRule::lattice},
+};
+
+constexpr Named<IntegratorType> kIntegrators[] = {
+    {"rk4", IntegratorType::rk4},
+    {"symplectic_euler", IntegratorType::symplectic_euler},
+    {"implicit_euler", IntegratorType::implicit_euler},
+};
+
+constexpr Named<uint32_t> kFaces[] = {
+    {"bottom", face_bottom}, {"top", face_top},     {"x_min", face_x_min}, {"x_max", face_x_max},
+    {"y_min", face_y_min},   {"y_max", face_y_max}, {"sides", faces_sides},
+};
+
+std::string_view name_of(std::string_view s) { return s; }
+template <class T>
+std::string_view name_of(const Named<T>& n) {
+  return n.name;
+}
+
+template <class List>
+std::string join_names(const List& list) {
+  std::string out;
+  for (const auto& item : list) {
+    if (!out.empty()) out += ", ";
+    out += name_of(item);
+  }
+  return out;
+}
+
+template <class T, std::size_t N>
+const char* name_for(const Named<T> (&names)[N], T value) {
+  for (const auto& n : names)
+    if (n.value == value) return n.name.data();  // the names are NUL-terminated literals
+  return "?";
+}
+
+// ---------------------------------------------------------------------------
+// Formatting for messages.
+
+// Shortest text that reads back as x, with a compact exponent: 0.7, 1000, 1e12, 1e-6.
+std::string fmt(double x) {
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof buf, x);
+  std::string s(buf, res.ptr);
+  if (const auto e = s.find('e'); e != std::string::npos) {
+    std::size_t digits = e + 1;
+    const bool negative = s[digits] == '-';
+    if (s[digits] == '+' || s[digits] == '-') ++digits;
+    while (digits + 1 < s.size() && s[digits] == '0') ++digits;
+    s = s.substr(0, e + 1) + (negative ? "-" : "") + s.substr(digits);
+  }
+  return s;
+}
+
+// "string \"NaN\"", "number 3.5", "array of 2 elements", "object", "null".
+std::string describe(const json& v) {
+  std::string s = v.type_name();
+  if (v.is_array()) return s + " of " + std::to_string(v.size()) + (v.size() == 1 ? " element" : " elements");
+  if (v.is_primitive() && !v.is_null()) {
+    std::string text = v.dump();
+    if (text.size() > 40) text = text.substr(0, 37) + "...";
+    s += " " + text;
+  }
+  return s;
+}
+
+// One reference token of a JSON pointer (RFC 6901: '~' -> "~0", '/' -> "~1").
+std::string pointer_token(std::string_view key) {
+  std::string out;
+  for (char c : key) {
+    if (c == '~') out += "~0";
+    else if (c == '/') out += "~1";
+    else out += c;
+  }
+  return out;
+}
+
+// True if `path` is `root` or lies below it.
+bool within(const std::string& path, const std::string& root) {
+  return path.compare(0, root.size(), root) == 0 && (path.size() == root.size() || path[root.size()] == '/');
+}
+
+// ---------------------------------------------------------------------------
+// Number ranges, with their text for messages.
+
+struct Range {
+  double lo, hi;
+  bool lo_open, hi_open;
+
+  bool contains(double x) const {
+    return (lo_open ? x > lo : x >= lo) && (hi_open ? x < hi : x <= hi);
+  }
+  std::string text() const {
+    if (hi == kInf) return (lo_open ? "> " : ">= ") + fmt(lo);
+    return std::string("in ") + (lo_open ? "(" : "[") + fmt(lo) + ", " + fmt(hi) + (hi_open ? ")" : "]");
+  }
+};
+constexpr Range closed(double lo, double hi) { return {lo, hi, false, false}; }
+constexpr Range open(double lo, double hi) { return {lo, hi, true, true}; }
+constexpr Range open_closed(double lo, double hi) { return {lo, hi, true, false}; }
+constexpr Range closed_open(double lo, double hi) { return {lo, hi, false, true}; }
+constexpr Range at_least(double lo) { return {lo, kInf, false, true}; }
+constexpr Range positive() { return {0.0, kInf, true, true}; }
+
+// ---------------------------------------------------------------------------
+// Where the scene text came from: the source name, and which pointers the
+// overrides set, so that an error in an overridden value names the override.
+
+struct Origin {
+  std::string source;
+  std::vector<std::pair<std::string, std::string>> overrides;  // (JSON pointer, "key=value")
+
+  std::string source_for(const std::string& field) const {
+    if (!field.empty())
+      for (auto it = overrides.rbegin(); it != overrides.rend(); ++it)  // the last override wins
+        if (within(field, it->first) || within(it->first, field)) return override_source(source, it->second);
+    return source;
+  }
+  static std::string override_source(const std::string& source, const std::string& assignment) {
+    return source + " (override " + assignment + ")";
+  }
+};
+
+// ---------------------------------------------------------------------------
+// A JSON value (possibly absent) and its JSON pointer. Every accessor that finds
+// the value unacceptable throws a SceneError naming that pointer. The get()
+// accessors leave their output (the struct default) untouched when the value is absent.
+
+class Reader {
+ public:
+  Reader(const json* value, std::string path, const Origin& origin)
+      : value_(value), path_(std::move(path)), origin_(&origin) {}
+
+  bool present() const { return value_ != nullptr; }
+
+  [[noreturn]] void fail(const std::string& reason) const {
+    throw SceneError(origin_->source_for(path_), path_, reason);
+  }
+
+  // A member of this object; absent when this is absent or has no such key.
+  Reader operator[](std::string_view key) const {
+    const json* child = nullptr;
+    if (value_ && value_->is_object())
+      if (const auto it = value_->find(key); it != value_->end()) child = &*it;
+    return {child, path_ + "/" + pointer_token(key), *origin_};
+  }
+
+  // Requires an object whose keys are all in `known`.
+  void object(std::initializer_list<std::string_view> known) const {
+    if (!present()) return;
+    if (!value_->is_object()) fail("expected an object, got " + describe(*value_));
+    for (const auto& item : value_->items()) {
+      bool ok = false;
+      for (std::string_view k : known) ok = ok || item.key() == k;
+      if (!ok) (*this)[item.key()].fail("unknown field (known: " + join_names(known) + ")");
+    }
+  }
+
+  // Requires an array; returns its elements. `what` describes the expected array.
+  std::vector<Reader> elements(std::string_view what) const {
+    if (!value_->is_array()) fail("expected " + std::string(what) + ", got " + describe(*value_));
+    std::vector<Reader> out;
+    for (std::size_t i = 0; i < value_->size(); ++i)
+      out.emplace_back(&(*value_)[i], path_ + "/" + std::to_string(i), *origin_);
+    return out;
+  }
+
+  // Requires a finite number.
+  double number() const {
+    if (!value_->is_number()) fail("expected a number, got " + describe(*value_));
+    const double x = value_->get<double>();
+    if (!std::isfinite(x)) fail("must be a finite number, got " + fmt(x));
+    return x;
+  }
+
+  void get(double& out, Range range) const {
+    if (!present()) return;
+    const double x = number();
+    if (!range.contains(x)) fail("must be a number " + range.text() + ", got " + fmt(x));
+    out = x;
+  }
+
+  void get(int& out, int lo, int hi) const {
+    if (!present()) return;
+    const double x = number();
+    if (x != std::floor(x) || x < lo || x > hi)
+      fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + fmt(x));
+    out = static_cast<int>(x);
+  }
+
+  void get(uint64_t& out) const {
+    if (!present()) return;
+    if (value_->is_number_unsigned()) {
+      out = value_->get<uint64_t>();
+      return;
+    }
+    const double x = number();
+    if (x != std::floor(x) || x < 0.0 || x >= 18446744073709551616.0)  // 2^64
+      fail("must be a non-negative integer, got " + fmt(x));
+    out = static_cast<uint64_t>(x);
+  }
+
+  // A non-empty string.
+  void get(std::string& out) const {
+    if (!present()) return;
+    if (!value_->is_string()) fail("expected a string, got " + describe(*value_));
+    const auto& s = value_->get_ref<const std::string&>();
+    if (s.empty()) fail("must be a non-empty string");
+    out = s;
+  }
+
+  // A 3-vector of finite numbers.
+  void get(Vec3& out) const {
+    if (!present()) return;
+    if (!value_->is_array() || value_->size() != 3) fail("expected an array of 3 numbers, got " + describe(*value_));
+    Vec3 v;
+    const auto e = elements("an array of 3 numbers");
+    for (int i = 0; i < 3; ++i) v[i] = e[i].number();  // in order: the first bad element is reported
+    out = v;
+  }
+
+  // One of `names` (the entries' names); nullptr when absent. `what` names the kind for messages.
+  template <class List>
+  auto pick(std::string_view what, const List& names) const -> decltype(std::data(names)) {
+    if (!present()) return nullptr;
+    if (!value_->is_string()) fail("expected a string, got " + describe(*value_));
+    const auto& s = value_->get_ref<const std::string&>();
+    for (const auto& n : names)
+      if (name_of(n) == s) return &n;
+    fail("unknown " + std::string(what) + " '" + s + "' (known: " + join_names(names) + ")");
+  }
+
+  template <class T, std::size_t N>
+  void get(T& out, std::string_view what, const Named<T> (&names)[N]) const {
+    if (const auto* n = pick(what, names)) out = n->value;
+  }
+
+ private:
+  const json* value_;  // nullptr: absent
+  std::string path_;
+  const Origin* origin_;
+};
+
+// ---------------------------------------------------------------------------
+// Sections, in document order.
+
+void read_box(const Reader& r, BoxSpec& box) {
+  r.object({"min", "max"});
+  r["min"].get(box.min);
+  r["max"].get(box.max);
+  constexpr char kAxis[] = "xyz";
+  for (int a = 0; a < 3; ++a) {
+    const double edge = box.max[a] - box.min[a];
+    if (!(edge > 0.0))
+      r.fail(std::string("max must exceed min in every component (") + kAxis[a] + ": max " + fmt(box.max[a]) +
+             " <= min " + fmt(box.min[a]) + ")");
+    if (edge > 1000.0)
+      r.fail(std::string("every edge must be at most 1000 m (") + kAxis[a] + ": " + fmt(edge) + " m)");
+  }
+}
+
+void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base_dir, DistributionSpec& d) {
+  r.object({"type", "per_edge", "spacing", "jitter", "seed", "node_file"});
+  r["type"].get(d.type, "distribution type", kDistributions);
+  r["per_edge"].get(d.per_edge, 2, 200);
+  r["spacing"].get(d.spacing, at_least(0.0));
+  r["jitter"].get(d.jitter, closed_open(0.0, 0.5));
+  r["seed"].get(d.seed);
+  std::string node_file;
+  r["node_file"].get(node_file);
+
+  if (d.spacing > 0.0 && d.type != DistributionType::node_file) {
+    constexpr char kAxis[] = "xyz";
+    for (int a = 0; a < 3; ++a) {
+      const double edge = box.max[a] - box.min[a];
+      const double nodes = std::round(edge / d.spacing) + 1.0;
+      if (nodes < 2.0 || nodes > 200.0)
+        r["spacing"].fail("gives " + (nodes > 1e6 ? std::string("over a million") : fmt(nodes)) + " nodes along " + kAxis[a] + " (edge " + fmt(edge) +
+                          " m); round(edge / spacing) + 1 must be in [2, 200]");
+    }
+  }
+
+  if (!node_file.empty()) {
+    fs::path p = node_file;
+    if (p.is_relative()) p = base_dir / p;
+    std::error_code ec;
+    const fs::path abs = fs::absolute(p, ec);
+    d.node_file = (ec ? p : abs).lexically_normal();
+  }
+  if (d.type == DistributionType::node_file) {
+    const Reader f = r["node_file"];
+    if (node_file.empty()) f.fail("required when type is 'node_file' (a text file of \"x y z\" lines)");
+    std::error_code ec;
+    const auto status = fs::status(d.node_file, ec);
+    if (!fs::exists(status))
+      f.fail("node file '" + node_file + "' not found (resolved to " + d.node_file.string() + ")");
+    if (fs::is_directory(status))
+      f.fail("node file '" + node_file + "' is a directory (resolved to " + d.node_file.string() + ")");
+  }
+}
+
+void read_body(const Reader& r, const fs::path& base_dir, Scene& s) {
+  r.object({"box", "distribution"});
+  read_box(r["box"], s.box);
+  read_distribution(r["distribution"], s.box, base_dir, s.distribution);
+}
+
+void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
+  r.object({"neighbors", "support_factor", "volumes", "hourglass", "regularization"});
+  r["neighbors"].get(m.neighbors, 4, 64);
+  r["support_factor"].get(m.support_factor, open_closed(0.0, 10.0));
+  r["volumes"].get(m.volumes, "volume rule", kVolumeRules);
+  r["hourglass"].get(m.hourglass, closed(0.0, 100.0));
+  r["regularization"].get(m.regularization, closed_open(0.0, 1.0));
+  if (m.volumes == VolumeRule::lattice && distribution == DistributionType::node_file)
+    r["volumes"].fail(
+        "'lattice' needs a lattice: a node_file cloud has no lattice cell volumes; use 'kernel' "
+        "(or a grid distribution)");
+}
+
+void read_material(const Reader& r, MaterialSpec& m) {
+  r.object({"young_modulus", "poisson_ratio", "density", "volume_stiffness"});
+  r["young_modulus"].get(m.young_modulus, open_closed(0.0, 1e12));
+  r["poisson_ratio"].get(m.poisson_ratio, open(-1.0, 0.5));
+  r["density"].get(m.density, open_closed(0.0, 1e5));
+  r["volume_stiffness"].get(m.volume_stiffness, closed(0.0, 1e12));
+}
+
+void read_fixed(const Reader& r, uint32_t& faces) {
+  if (!r.present()) return;  // absent: the default; [] is a free body
+  uint32_t out = 0;
+  for (const Reader& e : r.elements("an array of face names")) out |= e.pick("face", kFaces)->value;
+  faces = out;
+}
+
+void read_indenter(const Reader& r, IndenterSpec& ind) {
+  r.object({"radius", "mass", "position", "force"});
+  r["radius"].get(ind.radius, open_closed(0.0, 1e3));
+  r["mass"].get(ind.mass, open_closed(0.0, 1e6));
+  r["position"].get(ind.position);
+  ind.position_given = ind.position_given || r["position"].present();
+  r["force"].get(ind.force, closed(-1e9, 1e9));
+}
+
+void read_contact(const Reader& r, ContactSpec& c) {
+  r.object({"tolerance", "max_iterations"});
+  r["tolerance"].get(c.tolerance, open_closed(0.0, 1.0));
+  r["max_iterations"].get(c.max_iterations, 1, 1000000);
+}
+
+void read_integrator(const Reader& r, IntegratorSpec& in) {
+  r.object({"type", "dt", "damping", "cg_tolerance", "cg_max_iterations"});
+  r["type"].get(in.type, "integrator", kIntegrators);
+  r["dt"].get(in.dt, open_closed(0.0, 1.0));
+  r["damping"].get(in.damping, closed(0.0, 1e6));
+  r["cg_tolerance"].get(in.cg_tolerance, open(0.0, 1.0));
+  r["cg_max_iterations"].get(in.cg_max_iterations, 1, 1000000);
+}
+
+void read_gravity(const Reader& r, Vec3& g) {
+  r.get(g);
+  if (g.norm() > 1e3) r.fail("norm must be at most 1000 m/s^2, got " + fmt(g.norm()));
+}
+
+void read_verify(const Reader& r, VerifySpec& v) {
+  r.object({"forces", "rest"});
+  if (const Reader forces = r["forces"]; forces.present()) {
+    v.forces.clear();
+    for (const Reader& e : forces.elements("an array of forces in N")) {
+      double f = 0.0;
+      e.get(f, open_closed(0.0, 1e9));
+      v.forces.push_back(f);
+    }
+  }
+  const Reader rest = r["rest"];
+  rest.object({"velocity_tolerance", "force_tolerance", "window", "max_time"});
+  rest["velocity_tolerance"].get(v.rest.velocity_tolerance, positive());
+  rest["force_tolerance"].get(v.rest.force_tolerance, positive());
+  rest["window"].get(v.rest.window, positive());
+  rest["max_time"].get(v.rest.max_time, open_closed(0.0, 1e6));
+}
+
+void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
+  r.object({"name", "model", "body", "mls", "material", "fixed", "indenter", "contact", "integrator", "gravity",
+            "verify"});
+  r["name"].get(s.name);
+  if (const auto* m = r["model"].pick("model", kModels)) s.model = *m;
+  read_body(r["body"], base_dir, s);
+  read_mls(r["mls"], s.distribution.type, s.mls);
+  read_material(r["material"], s.material);
+  read_fixed(r["fixed"], s.fixed_faces);
+  read_indenter(r["indenter"], s.indenter);
+  read_contact(r["contact"], s.contact);
+  read_integrator(r["integrator"], s.integrator);
+  read_gravity(r["gravity"], s.gravity);
+  read_verify(r["verify"], s.verify);
+}
+
+// ---------------------------------------------------------------------------
+// JSON text and overrides.
+
+// nlohmann's message without its "[json.exception.x.nnn] " tag and its own position
+// ("parse error at line 3, column 0: "), whose column is unreliable.
+std::string json_message(const nlohmann::json::exception& e) {
+  std::string m = e.what();
+  if (const auto tag = m.find("] "); m.rfind("[json.exception.", 0) == 0 && tag != std::string::npos)
+    m.erase(0, tag + 2);
+  if (m.rfind("parse error", 0) == 0)
+    if (const auto colon = m.find(": "); colon != std::string::npos) m.erase(0, colon + 2);
+  return m;
+}
+
+// Line and column (1-based, columns in bytes) of the 1-based byte position `byte`.
+std::string line_column(const std::string& text, std::size_t byte) {
+  const std::size_t end = std::min(byte == 0 ? 0 : byte - 1, text.size());  // characters before it
+  std::size_t line = 1, line_start = 0;
+  for (std::size_t i = 0; i < end; ++i)
+    if (text[i] == '\n') ++line, line_start = i + 1;
+  return "line " + std::to_string(line) + ", column " + std::to_string(end - line_start + 1);
+}
+
+json parse_json(const std::string& text, const std::string& source) {
+  try {
+    return json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw SceneError(source, "", "invalid JSON at " + line_column(text, e.byte) + ": " + json_message(e));
+  } catch (const json::exception& e) {  // number overflow "... parsing '1e400'": no position given
+    const std::string message = json_message(e);
+    std::string where;
+    if (const auto open = message.find('\''), close = message.rfind('\''); open < close && close != std::string::npos)
+      if (const auto at = text.find(message.substr(open + 1, close - open - 1)); at != std::string::npos)
+        where = " at " + line_column(text, at + 1);
+    throw SceneError(source, "", "invalid JSON" + where + ": " + message);
+  }
+}
+
+// A JSON literal if the text is one ("12", "[0,0,1]", "\"x\"", "true"), else the bare string.
+json override_value(const std::string& text) {
+  try {
+    json v = json::parse(text, nullptr, /*allow_exceptions=*/false);
+    if (!v.is_discarded()) return v;
+  } catch (const json::exception&) {
+  }
+  return text;
+}
+
+// The array index a key token names ("2"), or SIZE_MAX.
+std::size_t array_index(const std::string& token) {
+  std::size_t i = 0;
+  const auto [end, ec] = std::from_chars(token.data(), token.data() + token.size(), i);
+  return ec == std::errc() && end == token.data() + token.size() ? i : std::numeric_limits<std::size_t>::max();
+}
+
+// Sets root at the dotted `key` (creating missing objects); returns the JSON pointer it set.
+std::string apply_override(json& root, const std::string& key, const std::string& value, const std::string& source) {
+  const std::string src = Origin::override_source(source, key + "=" + value);
+  std::vector<std::string> tokens;
+  for (std::size_t start = 0;;) {
+    const std::size_t dot = key.find('.', start);
+    tokens.push_back(key.substr(start, dot == std::string::npos ? std::string::npos : dot - start));
+    if (dot == std::string::npos) break;
+    start = dot + 1;
+  }
+  for (const auto& t : tokens)
+    if (t.empty()) throw SceneError(src, "", "override key must be a dotted field path such as body.distribution.per_edge");
+
+  json* node = &root;
+  std::string path;
+  for (const auto& t : tokens) {
+    if (node->is_null()) *node = json::object();  // a missing intermediate object
+    if (node->is_object()) {
+      node = &(*node)[t];
+    } else if (const std::size_t i = array_index(t); node->is_array() && i < node->size()) {
+      node = &(*node)[i];
+    } else {
+      throw SceneError(src, path, "cannot set '" + t + "' in " + describe(*node) + " (override " + key + ")");
+    }
+    path += "/" + pointer_token(t);
+  }
+  *node = override_value(value);
+  return path;
+}
+
+}  // namespace
+
+Scene parse_scene(const std::string& json_text, const std::string& source_name, const fs::path& base_dir,
+                  const SceneOverrides& overrides) {
+  json root = parse_json(json_text, source_name);
+  if (!root.is_object()) throw SceneError(source_name, "", "the top-level value must be an object, got " + describe(root));
+
+  Origin origin{source_name, {}};
+  for (const auto& [key, value] : overrides)
+    origin.overrides.emplace_back(apply_override(root, key, value, source_name), key + "=" + value);
+
+  Scene scene;
+  scene.source = source_name;
+  scene.name = fs::path(source_name).stem().string();
+  read_scene(Reader(&root, "", origin), base_dir, scene);
+  return scene;
+}
+
+Scene load_scene(const fs::path& file, const SceneOverrides& overrides) {
+  const std::string source = file.string();
+  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(file.c_str(), "rb"), &std::fclose);
+  if (!f) throw SceneError(source, "", std::string("cannot read file: ") + std::strerror(errno));
+  std::string text;
+  char buf[1 << 16];
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f.get())) > 0) text.append(buf, n);
+  if (std::ferror(f.get())) throw SceneError(source, "", std::string("cannot read file: ") + std::strerror(errno));
+  return parse_scene(text, source, file.parent_path(), overrides);
+}
+
+const char* to_string(IntegratorType t) { return name_for(kIntegrators, t); }
+const char* to_string(DistributionType t) { return name_for(kDistributions, t); }
+
+}  // namespace palpate

@@ -1,0 +1,137 @@
+#pragma once
+// Scene description: plain structs filled from a JSON scene file (see README,
+// "Scene format"). Every field has the default of the paper's set-up
+// (physics.md §4); a scene file names only what differs. Only what a scene
+// names is built and computed.
+#include <cstdint>
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/types.h"
+
+namespace palpate {
+
+// Thrown for a malformed or out-of-range scene. what() names the source (file),
+// the field (JSON pointer, e.g. "/material/poisson_ratio") and the reason.
+class SceneError : public std::runtime_error {
+ public:
+  SceneError(const std::string& source, const std::string& field, const std::string& reason);
+  const std::string& source() const { return source_; }
+  const std::string& field() const { return field_; }
+  const std::string& reason() const { return reason_; }
+
+ private:
+  std::string source_, field_, reason_;
+};
+
+enum class DistributionType { grid, jittered_grid, node_file };
+enum class VolumeRule { kernel, lattice };  // kernel sums, or lattice cell volumes
+enum class IntegratorType { rk4, symplectic_euler, implicit_euler };
+
+// Faces of the body's box, as bits of Scene::fixed_faces.
+enum Face : uint32_t {
+  face_x_min = 1u << 0,
+  face_x_max = 1u << 1,
+  face_y_min = 1u << 2,
+  face_y_max = 1u << 3,
+  face_bottom = 1u << 4,  // z_min
+  face_top = 1u << 5,     // z_max
+  faces_sides = face_x_min | face_x_max | face_y_min | face_y_max,
+};
+
+struct BoxSpec {
+  Vec3 min{-1.0, -1.0, -2.0};  // m; the default cube of edge 2 m with its top face at z = 0
+  Vec3 max{1.0, 1.0, 0.0};
+};
+
+struct DistributionSpec {
+  DistributionType type = DistributionType::grid;
+  int per_edge = 18;          // nodes per box edge (grid, jittered_grid) when spacing == 0
+  double spacing = 0.0;       // m; > 0 chooses the lattice by spacing instead of per_edge
+  double jitter = 0.3;        // jittered_grid: displacement bound as a fraction of the spacing
+  uint64_t seed = 1;          // jittered_grid: random seed
+  std::filesystem::path node_file;  // node_file: "x y z" per line, resolved against the scene's folder
+};
+
+struct MlsSpec {
+  int neighbors = 16;            // k of the k-nearest-neighbour support (paper: 16)
+  double support_factor = 1.0;   // alpha: h_i = alpha * mean distance to the k neighbours
+  VolumeRule volumes = VolumeRule::kernel;
+  double hourglass = 0.0;        // dimensionless hourglass-control stiffness (0 = off)
+  double regularization = 1e-6;  // relative eigenvalue floor of the moment matrix
+};
+
+struct MaterialSpec {
+  double young_modulus = 1.0e4;   // Pa
+  double poisson_ratio = 0.3;
+  double density = 1000.0;        // kg/m^3
+  double volume_stiffness = 0.0;  // k_v of the volume-restoring term, Pa; 0 = off
+};
+
+struct IndenterSpec {
+  double radius = 0.5;           // m
+  double mass = 1.0;             // kg
+  bool position_given = false;   // false: centred over the top face, just touching it
+  Vec3 position{0.0, 0.0, 0.0};  // m, initial centre when position_given
+  double force = 0.0;            // N, initial commanded force pressing down (-z)
+};
+
+struct ContactSpec {
+  double tolerance = 1e-6;   // m, allowed penetration after the contact solve
+  int max_iterations = 200;  // pivoting steps of the active-set solve
+};
+
+struct IntegratorSpec {
+  IntegratorType type = IntegratorType::rk4;
+  double dt = 1e-3;              // s
+  double damping = 0.0;          // 1/s, mass-proportional (Rayleigh alpha) damping
+  double cg_tolerance = 1e-8;    // implicit Euler: relative residual of the CG solve
+  int cg_max_iterations = 1000;  // implicit Euler
+};
+
+// When a quasi-static run (palpate-verify) calls the state "at rest" (physics.md §2).
+struct RestSpec {
+  double velocity_tolerance = 1e-4;  // m/s, max particle and indenter speed
+  double force_tolerance = 1e-3;     // relative |contact force - command| / command
+  double window = 0.05;              // s the criteria must hold continuously
+  double max_time = 60.0;            // s of simulated time before giving up
+};
+
+struct VerifySpec {
+  std::vector<double> forces;  // N, the force sweep; empty: Hertz depths 0.01 ... 0.1 m
+  RestSpec rest;
+};
+
+struct Scene {
+  std::string name;
+  std::string source;        // where the scene came from (file path), for messages
+  std::string model = "mls";
+  BoxSpec box;
+  DistributionSpec distribution;
+  MlsSpec mls;
+  MaterialSpec material;
+  uint32_t fixed_faces = face_bottom | faces_sides;
+  IndenterSpec indenter;
+  ContactSpec contact;
+  IntegratorSpec integrator;
+  Vec3 gravity{0.0, 0.0, 0.0};  // m/s^2, acts on the body and the indenter
+  VerifySpec verify;
+};
+
+// "key=value" overrides applied to the JSON before validation; key is the dotted
+// path of a field ("body.distribution.per_edge"), value a JSON literal or a bare string.
+using SceneOverrides = std::vector<std::pair<std::string, std::string>>;
+
+// Reads and validates a scene file. Throws SceneError naming file, field and reason.
+Scene load_scene(const std::filesystem::path& file, const SceneOverrides& overrides = {});
+// The same from text; base_dir resolves relative file names inside the scene.
+Scene parse_scene(const std::string& json_text, const std::string& source_name,
+                  const std::filesystem::path& base_dir, const SceneOverrides& overrides = {});
+
+const char* to_string(IntegratorType);
+const char* to_string(DistributionType);
+
+}  // namespace palpate

@@ -1,0 +1,45 @@
+#include "core/step.h"
+
+#include <cmath>
+
+#include "core/contact.h"
+#include "core/integrators.h"
+
+namespace palpate {
+
+StepStatus step(const Model& model, State& state) {
+  StepStatus status = StepStatus::ok;
+  switch (model.scene.integrator.type) {
+    case IntegratorType::rk4:
+      free_motion_rk4(model, state);
+      status = solve_contact(model, state);
+      break;
+    case IntegratorType::symplectic_euler:
+      free_motion_symplectic_euler(model, state);
+      status = solve_contact(model, state);
+      break;
+    case IntegratorType::implicit_euler: {
+      free_motion_implicit_euler(model, state);
+      ImplicitEulerOperator response(model, state);  // A, for the coupled contact response
+      status = solve_contact(model, state, &response);
+      break;
+    }
+  }
+  state.time += model.scene.integrator.dt;
+  ++state.tick;
+  // A NaN or Inf anywhere in the positions makes their sum non-finite.
+  if (!std::isfinite(state.position.sum() + state.indenter_center[2] + state.indenter_velocity))
+    return StepStatus::non_finite;
+  return status;
+}
+
+const char* to_string(StepStatus s) {
+  switch (s) {
+    case StepStatus::ok: return "ok";
+    case StepStatus::non_finite: return "non-finite state";
+    case StepStatus::contact_not_converged: return "contact solve did not converge";
+  }
+  return "?";
+}
+
+}  // namespace palpate

@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Installs the Debian packages palpate needs, only those that are missing.
+# Idempotent and silent when everything is already there.
+set -euo pipefail
+packages=(
+  build-essential cmake pkg-config
+  libeigen3-dev libnanoflann-dev
+  capnproto libcapnp-dev
+  libspdlog-dev libgtest-dev libbenchmark-dev
+  nlohmann-json3-dev          # scene files: JSON parsing with field paths in error messages
+  python3-matplotlib python3-numpy   # plots in docs/ (glue only)
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+echo "setup: installing ${missing[*]}"
+SUDO=""
+[ "$(id -u)" -ne 0 ] && SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq "${missing[@]}" >/dev/null

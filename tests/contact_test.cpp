@@ -1,0 +1,122 @@
+// Frictionless unilateral contact with Lagrange multipliers: the LCP solver,
+// Signorini conditions along a loading, global force balance at rest, release.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "core/contact.h"
+#include "core/indentation.h"
+#include "core/mls_forces.h"
+#include "core/state.h"
+#include "core/step.h"
+#include "test_util.h"
+
+namespace palpate {
+namespace {
+
+TEST(SignoriniLcp, SolutionIsComplementaryOnRandomSpdProblems) {
+  std::mt19937 rng(1);
+  std::normal_distribution<double> normal;
+  Workspace work;
+  for (int trial = 0; trial < 50; ++trial) {
+    const int m = 1 + trial % 17;
+    Eigen::MatrixXd B(m + 2, m);
+    for (int r = 0; r < B.rows(); ++r)
+      for (int c = 0; c < m; ++c) B(r, c) = normal(rng);
+    // Row-major storage of W = B^T B + 0.1 I (symmetric, so the layout is the same).
+    const Eigen::MatrixXd W = B.transpose() * B + 0.1 * Eigen::MatrixXd::Identity(m, m);
+    Eigen::VectorXd g(m);
+    for (int a = 0; a < m; ++a) g[a] = normal(rng);
+    Eigen::VectorXd lambda(m);
+    const int iterations = solve_signorini_lcp(m, W.data(), g.data(), lambda.data(), 1e-12, 200, work);
+    ASSERT_GT(iterations, 0) << "trial " << trial;
+    const Eigen::VectorXd w = g + W * lambda;
+    for (int a = 0; a < m; ++a) {
+      EXPECT_GE(lambda[a], 0.0);
+      EXPECT_GE(w[a], -1e-9);
+      EXPECT_LT(std::abs(lambda[a] * w[a]), 1e-9);
+    }
+  }
+}
+
+std::string pressed_block(const std::string& integrator, double dt) {
+  return R"({"body": {"box": {"min": [-0.5,-0.5,-1], "max": [0.5,0.5,0]},
+                      "distribution": {"type": "grid", "per_edge": 8}},
+             "mls": {"volumes": "lattice"},
+             "material": {"young_modulus": 10000, "poisson_ratio": 0.3, "density": 1000},
+             "indenter": {"radius": 0.3, "mass": 0.5},
+             "contact": {"tolerance": 1e-7},
+             "integrator": {"type": ")" + integrator + R"(", "dt": )" + std::to_string(dt) +
+         R"(, "damping": 10},
+             "verify": {"rest": {"velocity_tolerance": 1e-6, "force_tolerance": 1e-4, "window": 0.05}}})";
+}
+
+// Smallest actual (nonlinear) gap between the sphere and any particle, m.
+double min_gap(const Model& m, const State& s) {
+  double gap = INFINITY;
+  for (int i = 0; i < m.particle_count; ++i)
+    gap = std::min(gap, (s.position.col(i) - s.indenter_center).norm() - m.indenter_radius);
+  return gap;
+}
+
+void press_release(const std::string& integrator, double dt) {
+  SCOPED_TRACE(integrator);
+  const Model m = test::model_from_json(pressed_block(integrator, dt));
+  State s = make_state(m);
+  const double force = 20.0;
+  s.force_command = force;
+  RestMonitor rest(m.scene.verify.rest);
+  bool at_rest = false;
+  int steps = 0;
+  size_t most_contacts = 0;
+  for (; steps < static_cast<int>(20.0 / dt) && !at_rest; ++steps) {
+    ASSERT_EQ(step(m, s), StepStatus::ok) << "step " << steps;
+    for (double lambda : s.contact_multiplier) ASSERT_GT(lambda, 0.0);
+    most_contacts = std::max(most_contacts, s.contact_index.size());
+    // Signorini: no penetration beyond the solver tolerance plus the second-order
+    // error of the linearised sphere motion.
+    ASSERT_GT(min_gap(m, s), -1e-5) << "step " << steps;
+    at_rest = rest.update(m, s);
+  }
+  ASSERT_TRUE(at_rest) << "no rest after " << steps << " steps";
+  EXPECT_GT(most_contacts, 0u);
+  EXPECT_GT(indentation(m, s), 0.0);
+  // At rest the contact forces on the particles add up to the command (pointing down)...
+  Vec3 contact_sum = Vec3::Zero();
+  for (size_t c = 0; c < s.contact_index.size(); ++c) contact_sum += s.contact_force.col(static_cast<Eigen::Index>(c));
+  EXPECT_NEAR(contact_sum[2], -force, 1e-3 * force);
+  EXPECT_NEAR(s.indenter_contact_force, force, 1e-3 * force);
+  // ... and the fixed supports carry it: internal forces sum to zero, free particles
+  // (damping forces c m v <= 10 * 800 kg * 1e-6 m/s = 0.008 N at rest)
+  // are in equilibrium with the contact, so the fixed particles' internal forces
+  // balance the command (an independent global balance).
+  Points f(3, m.particle_count);
+  internal_forces(m, s.position, f);
+  Vec3 support = Vec3::Zero();
+  double free_residual = 0;
+  for (int i = 0; i < m.particle_count; ++i) {
+    if (m.fixed[i]) support += f.col(i);
+  }
+  Points residual = f;
+  for (size_t c = 0; c < s.contact_index.size(); ++c)
+    residual.col(s.contact_index[c]) += s.contact_force.col(static_cast<Eigen::Index>(c));
+  for (int i = 0; i < m.particle_count; ++i)
+    if (!m.fixed[i]) free_residual = std::max(free_residual, residual.col(i).norm());
+  EXPECT_NEAR(support[2], -force, 5e-4 * force);
+  EXPECT_LT(free_residual, 5e-4 * force);
+
+  // Unilateral: pulling the indenter up releases the contact, no force sticks.
+  s.force_command = -5.0;
+  for (int k = 0; k < static_cast<int>(1.0 / dt); ++k) ASSERT_EQ(step(m, s), StepStatus::ok);
+  EXPECT_TRUE(s.contact_index.empty());
+  EXPECT_EQ(s.indenter_contact_force, 0.0);
+  EXPECT_GT(min_gap(m, s), 0.0);
+}
+
+TEST(SphereContact, SymplecticEuler) { press_release("symplectic_euler", 1e-3); }
+TEST(SphereContact, Rk4) { press_release("rk4", 1e-3); }
+TEST(SphereContact, ImplicitEuler) { press_release("implicit_euler", 1e-2); }
+
+}  // namespace
+}  // namespace palpate

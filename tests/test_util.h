@@ -1,0 +1,15 @@
+#pragma once
+// Helpers shared by the tests: models from inline scene text.
+#include <string>
+
+#include "core/model.h"
+#include "core/scene.h"
+
+namespace palpate::test {
+
+// A scene from inline JSON (validated like a file).
+inline Scene scene_from_json(const std::string& json) { return parse_scene(json, "inline-test-scene", "."); }
+
+inline Model model_from_json(const std::string& json) { return build_model(scene_from_json(json)); }
+
+}  // namespace palpate::test
