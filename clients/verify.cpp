@@ -153,27 +153,18 @@ int main(int argc, char** argv) {
     } catch (const std::domain_error&) {
       row.d_layer = NAN;
     }
-    state.force_command = row.force;
-    RestMonitor rest(scene.verify.rest);
     const auto start = std::chrono::steady_clock::now();
     const double t0 = state.time;
-    const long max_steps = static_cast<long>(std::ceil(scene.verify.rest.max_time / scene.integrator.dt));
-    for (long s = 0; s < max_steps; ++s) {
-      const StepStatus status = step(model, state);
-      ++row.steps;
-      if (status == StepStatus::non_finite) {
-        row.status = "diverged";
-        break;
-      }
-      if (trace_interval > 0 && row.steps % std::max(1L, std::lround(trace_interval / scene.integrator.dt)) == 0)
+    const long trace_every = trace_interval > 0 ? std::max(1L, std::lround(trace_interval / scene.integrator.dt)) : 0;
+    const PressResult press = press_to_rest(model, state, row.force, [&](const State& s) {
+      if (trace_every > 0 && s.tick % trace_every == 0)
         std::fprintf(stderr, "    t = %8.3f s  d = %.6f m  contact %9.4f N (%zu particles)  v_ind = %+.2e  max v = %.2e m/s\n",
-                     state.time, indentation(model, state), state.indenter_contact_force, state.contact_index.size(),
-                     state.indenter_velocity, max_particle_speed(state));
-      if (rest.update(model, state)) {
-        row.at_rest = true;
-        break;
-      }
-    }
+                     s.time, indentation(model, s), s.indenter_contact_force, s.contact_index.size(),
+                     s.indenter_velocity, max_particle_speed(s));
+    });
+    row.steps = press.steps;
+    row.at_rest = press.at_rest;
+    if (press.status == StepStatus::non_finite) row.status = "diverged";
     row.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     row.sim_time = state.time - t0;
     if (row.status == "diverged") {

@@ -3,6 +3,7 @@
 // conditions -> indenter placement. Everything that depends only on the
 // reference configuration is computed here, once.
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 #include <spdlog/spdlog.h>
@@ -44,6 +45,45 @@ double first_touch_height(const Points& X, double cx, double cy, double radius) 
     if (r2 < radius * radius) top = std::max(top, X(2, i) + std::sqrt(radius * radius - r2));
   }
   return top;
+}
+
+// The blocked layout of the force loop (Model::blocks, Model::block_slots): the
+// support domains, gradient weights, rest corrections and volumes regrouped four
+// particles at a time, neighbour lists padded to the block's longest.
+void build_force_blocks(Model& m) {
+  constexpr int W = Model::block_width;
+  const int n = m.particle_count;
+  const int block_count = (n + W - 1) / W;
+  m.blocks.assign(block_count, Model::ParticleBlock{});
+  m.block_slots.clear();
+  for (int b = 0; b < block_count; ++b) {
+    Model::ParticleBlock& block = m.blocks[b];
+    int longest = 0;
+    for (int l = 0; l < W; ++l) {
+      const int i = W * b + l;
+      if (i < n) longest = std::max(longest, m.neighbor_offset[i + 1] - m.neighbor_offset[i]);
+    }
+    block.slot_begin = static_cast<int>(m.block_slots.size());
+    block.slot_end = block.slot_begin + longest;
+    m.block_slots.resize(block.slot_end, Model::NeighborSlot{});
+    for (int l = 0; l < W; ++l) {
+      const int i = W * b + l;
+      if (i >= n) {  // padding lane: weightless, its neighbours are particle 0
+        block.volume[l] = 0.0;
+        for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = 0.0;
+        continue;
+      }
+      block.volume[l] = m.volume[i];
+      for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = m.rest_correction[9 * static_cast<size_t>(i) + k];
+      const int count = m.neighbor_offset[i + 1] - m.neighbor_offset[i];
+      for (int s = 0; s < longest; ++s) {
+        Model::NeighborSlot& slot = m.block_slots[block.slot_begin + s];
+        const int a = m.neighbor_offset[i] + s;
+        slot.j[l] = s < count ? m.neighbor_index[a] : i;
+        for (int c = 0; c < 3; ++c) slot.d[c][l] = s < count ? m.gradient_weight(c, a) : 0.0;
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -149,6 +189,7 @@ Model build_model(const Scene& scene) {
     Eigen::Map<Mat3> correction(&m.rest_correction[9 * static_cast<size_t>(i)]);
     correction = Mat3::Identity() - B;
   }
+  build_force_blocks(m);
 
   // Material (Lame parameters from E, nu).
   const MaterialSpec& mat = scene.material;

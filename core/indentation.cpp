@@ -14,6 +14,10 @@ void RestMonitor::start_window(const State& state) {
   held_ = 0.0;
 }
 
+PressResult press_to_rest(const Model& model, State& state, double force) {
+  return press_to_rest(model, state, force, [](const State&) {});
+}
+
 bool RestMonitor::update(const Model& model, const State& state) {
   const double dt = model.scene.integrator.dt;
   const double imbalance = std::abs(state.indenter_contact_force - state.force_command);

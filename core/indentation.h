@@ -1,5 +1,7 @@
 #pragma once
 // The indentation measure and rest detection (physics.md §2).
+#include <cmath>
+
 #include "core/model.h"
 #include "core/scene.h"
 #include "core/state.h"
@@ -33,5 +35,43 @@ class RestMonitor {
   Points window_start_position_;
   double window_start_indenter_ = 0.0;
 };
+
+// Presses the indenter with `force` from the current state and steps until
+// RestMonitor reports rest, the state turns non-finite, or rest.max_time of
+// simulated time has passed (the quasi-static loading of palpate-verify).
+struct PressResult {
+  bool at_rest = false;
+  StepStatus status = StepStatus::ok;  // the last step's status
+  long steps = 0;
+  double indentation = 0.0;            // m, at the end
+};
+// `observer(state)` (optional) is called after every step.
+template <class Observer>
+PressResult press_to_rest(const Model& model, State& state, double force, Observer&& observer);
+PressResult press_to_rest(const Model& model, State& state, double force);
+
+}  // namespace palpate
+
+#include "core/step.h"
+
+namespace palpate {
+
+template <class Observer>
+PressResult press_to_rest(const Model& model, State& state, double force, Observer&& observer) {
+  const RestSpec& spec = model.scene.verify.rest;
+  RestMonitor rest(spec);
+  state.force_command = force;
+  PressResult result;
+  const long max_steps = static_cast<long>(std::ceil(spec.max_time / model.scene.integrator.dt));
+  for (; result.steps < max_steps && !result.at_rest;) {
+    result.status = step(model, state);
+    ++result.steps;
+    observer(state);
+    if (result.status == StepStatus::non_finite) return result;
+    result.at_rest = rest.update(model, state);
+  }
+  result.indentation = indentation(model, state);
+  return result;
+}
 
 }  // namespace palpate

@@ -31,6 +31,24 @@ struct Model {
   std::vector<uint8_t> fixed;            // n, 1 = fixed particle
   int fixed_count = 0;
 
+  // Blocked copy of the support domains for the vectorised force loop (mls_forces.cpp).
+  // Particles 4b ... 4b+3 form block b (lanes 0..3; lanes >= n of the last block are
+  // padding with zero volume and zero weights). Slot s of a block holds the s-th
+  // neighbour of each of its four particles; shorter neighbour lists are padded to the
+  // block's longest with d = 0 and j = the lane's own particle, which adds nothing.
+  static constexpr int block_width = 4;
+  struct NeighborSlot {
+    alignas(32) double d[3][block_width];  // d_j: component c of lane l at d[c][l]
+    int j[block_width];                    // neighbour particle of each lane
+  };
+  struct ParticleBlock {
+    alignas(32) double rest_correction[9][block_width];  // C_i entry k (column-major 3x3) of lane l
+    double volume[block_width];                          // v_i, m^3; 0 in padding lanes
+    int slot_begin = 0, slot_end = 0;                    // its slots in block_slots
+  };
+  std::vector<ParticleBlock> blocks;      // ceil(n / 4)
+  std::vector<NeighborSlot> block_slots;  // sum over blocks of the longest neighbour list
+
   // Hourglass control (empty when scene.mls.hourglass == 0).
   std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
   Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)

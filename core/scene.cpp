@@ -532,7 +532,8 @@ std::string apply_override(json& root, const std::string& key, const std::string
     } else {
       throw SceneError(src, path, "cannot set '" + t + "' in " + describe(*node) + " (override " + key + ")");
     }
-    path += "/" + pointer_token(t);
+    path.push_back('/');
+    path += pointer_token(t);
   }
   *node = override_value(value);
   return path;

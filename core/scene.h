@@ -1,8 +1,9 @@
 #pragma once
-// Scene description: plain structs filled from a JSON scene file (see README,
-// "Scene format"). Every field has the default of the paper's set-up
-// (physics.md §4); a scene file names only what differs. Only what a scene
-// names is built and computed.
+// Scene description: plain structs filled from a JSON scene file
+// (docs/scene-format.md lists every field). The defaults are the paper's set-up
+// (physics.md §4 of the shared reference) except where a default must be neutral
+// (no damping, no gravity, kernel volumes); scenes/hertz_cube.json writes the
+// verification set-up out in full. Only what a scene names is built and computed.
 #include <cstdint>
 #include <filesystem>
 #include <stdexcept>
@@ -53,7 +54,8 @@ struct DistributionSpec {
   double spacing = 0.0;       // m; > 0 chooses the lattice by spacing instead of per_edge
   double jitter = 0.3;        // jittered_grid: displacement bound as a fraction of the spacing
   uint64_t seed = 1;          // jittered_grid: random seed
-  std::filesystem::path node_file;  // node_file: "x y z" per line, resolved against the scene's folder
+  std::filesystem::path node_file;  // node_file: "x y z" per line; holds the absolute path, resolved
+                                    // against the scene file's folder
 };
 
 struct MlsSpec {
