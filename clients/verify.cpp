@@ -37,8 +37,9 @@ compares the indentation d with Hertz theory.
   --quiet             no progress on stderr
   --trace SECONDS     print the state every SECONDS of simulated time (stderr)
   --log-level LEVEL   spdlog level (default: warn)
-Indentation d: travel of the indenter centre below the height at which the sphere
-first touches the undeformed body. Errors: (d_sim - d_ref) / d_ref; the L2 error
+Indentation d: travel of the indenter below the height at which it touches the
+undeformed surface (the highest particle under it); with the sphere centred
+between lattice particles d includes the strain-free sinking between them. Errors: (d_sim - d_ref) / d_ref; the L2 error
 is ||d_sim - d_ref|| / ||d_ref|| over the sweep.
 )";
 

@@ -37,12 +37,16 @@ bool regularized_inverse(const Mat3& A, double floor_ratio, Mat3& A_inv, double&
 }
 
 // Height of the indenter centre when the sphere (centre above (cx, cy)) first
-// touches a particle of the undeformed body.
-double first_touch_height(const Points& X, double cx, double cy, double radius) {
+// touches a particle of the undeformed body; also the height of the undeformed
+// surface under the sphere (the highest particle within its footprint).
+double first_touch_height(const Points& X, double cx, double cy, double radius, double& surface) {
   double top = -INFINITY;
+  surface = -INFINITY;
   for (Eigen::Index i = 0; i < X.cols(); ++i) {
     const double r2 = (X(0, i) - cx) * (X(0, i) - cx) + (X(1, i) - cy) * (X(1, i) - cy);
-    if (r2 < radius * radius) top = std::max(top, X(2, i) + std::sqrt(radius * radius - r2));
+    if (r2 >= radius * radius) continue;
+    top = std::max(top, X(2, i) + std::sqrt(radius * radius - r2));
+    surface = std::max(surface, X(2, i));
   }
   return top;
 }
@@ -71,6 +75,7 @@ void build_force_blocks(Model& m) {
       if (i >= n) {  // padding lane: weightless, its neighbours are particle 0
         block.volume[l] = 0.0;
         for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = 0.0;
+        for (int c = 0; c < 3; ++c) block.self_weight[c][l] = 0.0;
         continue;
       }
       block.volume[l] = m.volume[i];
@@ -82,25 +87,33 @@ void build_force_blocks(Model& m) {
         slot.j[l] = s < count ? m.neighbor_index[a] : i;
         for (int c = 0; c < 3; ++c) slot.d[c][l] = s < count ? m.gradient_weight(c, a) : 0.0;
       }
+      for (int c = 0; c < 3; ++c) {
+        double sum = 0;
+        for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) sum += m.gradient_weight(c, a);
+        block.self_weight[c][l] = -sum;
+      }
     }
   }
 }
 
-}  // namespace
+// Material (Lame parameters from E, nu).
+void set_material(Model& m) {
+  const MaterialSpec& mat = m.scene.material;
+  m.lame_lambda = mat.young_modulus * mat.poisson_ratio / ((1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio));
+  m.lame_mu = mat.young_modulus / (2 * (1 + mat.poisson_ratio));
+  m.volume_stiffness = mat.volume_stiffness;
+  m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / mat.density);
+}
 
-Model build_model(const Scene& scene) {
-  if (scene.model != "mls") throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
-  Model m;
-  m.scene = scene;
-  const NodeCloud cloud = make_node_cloud(scene);
-  const int n = static_cast<int>(cloud.positions.cols());
+// The MLS solid: supports, volumes, moment matrices, gradient weights, hourglass weights.
+void build_mls(Model& m, const NodeCloud& cloud) {
+  const Scene& scene = m.scene;
+  const int n = m.particle_count;
+  const Points& X = m.rest_position;
   const int k = scene.mls.neighbors;
   if (k >= n)
     throw SceneError(scene.source, "/mls/neighbors",
                      "k = " + std::to_string(k) + " needs more particles than the cloud's " + std::to_string(n));
-  m.particle_count = n;
-  m.rest_position = cloud.positions;
-  const Points& X = m.rest_position;
 
   const Neighborhoods nb = k_nearest_neighbors(X, k);
 
@@ -162,7 +175,6 @@ Model build_model(const Scene& scene) {
     }
   }
   m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
-  m.box_volume = (scene.box.max - scene.box.min).prod();
 
   // Moment matrices and gradient weights (A-6 ... A-9, M-14, M-15):
   // A_i = sum_j w_ij x_ij x_ij^T, d_j = A_i^-1 x_ij w_ij.
@@ -191,13 +203,6 @@ Model build_model(const Scene& scene) {
   }
   build_force_blocks(m);
 
-  // Material (Lame parameters from E, nu).
-  const MaterialSpec& mat = scene.material;
-  m.lame_lambda = mat.young_modulus * mat.poisson_ratio / ((1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio));
-  m.lame_mu = mat.young_modulus / (2 * (1 + mat.poisson_ratio));
-  m.volume_stiffness = mat.volume_stiffness;
-  m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / rho);
-
   // Hourglass control: kappa_i = c * 2 mu * v_i / tr(A_i), per neighbour kappa_i w_ij.
   if (scene.mls.hourglass > 0) {
     m.hourglass_weight.resize(nnz);
@@ -211,6 +216,26 @@ Model build_model(const Scene& scene) {
     }
   }
 
+}
+
+// The hexahedral FEM reference: the lattice's bricks, lumped masses (rho times the
+// nodes' lattice volumes = the row sums of the consistent mass of trilinear bricks).
+void build_hex_fem(Model& m, const NodeCloud& cloud) {
+  m.solid = SolidKind::hex_fem;
+  m.hex = hex_mesh(m.rest_position, cloud.lattice_size, m.lame_lambda, m.lame_mu, m.scene.hex_fem.formulation);
+  m.volume = cloud.lattice_volume;
+  m.mass.resize(m.particle_count);
+  for (int i = 0; i < m.particle_count; ++i) m.mass[i] = m.scene.material.density * m.volume[i];
+  m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
+  m.min_spacing = INFINITY;
+  for (const Vec3& size : m.hex.element_size) m.min_spacing = std::min(m.min_spacing, size.minCoeff());
+}
+
+// Fixed particles and the indenter's placement (both models).
+void set_boundary_and_indenter(Model& m) {
+  const Scene& scene = m.scene;
+  const int n = m.particle_count;
+  const Points& X = m.rest_position;
   // Boundary conditions.
   m.fixed = particles_on_faces(X, scene.fixed_faces);
   m.inverse_mass.resize(n);
@@ -225,18 +250,43 @@ Model build_model(const Scene& scene) {
   const Vec3 centre_xy = 0.5 * (X.rowwise().minCoeff() + X.rowwise().maxCoeff());
   m.indenter_start = scene.indenter.position_given ? scene.indenter.position
                                                    : Vec3(centre_xy[0], centre_xy[1], 0.0);
-  m.touch_height = first_touch_height(X, m.indenter_start[0], m.indenter_start[1], m.indenter_radius);
-  if (!std::isfinite(m.touch_height))
+  double surface;
+  const double first_contact =
+      first_touch_height(X, m.indenter_start[0], m.indenter_start[1], m.indenter_radius, surface);
+  if (!std::isfinite(first_contact))
     throw SceneError(scene.source, "/indenter/position", "the indenter is not above the body");
-  if (!scene.indenter.position_given) m.indenter_start[2] = m.touch_height;
-  if (m.indenter_start[2] < m.touch_height - 1e-12)
+  // Indentation is measured from the sphere touching the undeformed surface (physics.md §2);
+  // the sphere starts resting on the particles, which may already be below that by the
+  // strain-free sinking between them.
+  m.touch_height = surface + m.indenter_radius;
+  if (!scene.indenter.position_given) m.indenter_start[2] = first_contact;
+  if (m.indenter_start[2] < first_contact - 1e-12)
     throw SceneError(scene.source, "/indenter/position",
                      "the indenter starts inside the body (its centre must be at z >= " +
-                         std::to_string(m.touch_height) + ")");
+                         std::to_string(first_contact) + ")");
 
-  spdlog::debug("model: {} particles, {} neighbour pairs, {} fixed, {} regularised (worst cond {:.3g}), "
-                "volume {:.4g} of box {:.4g}",
-                n, nnz, m.fixed_count, m.regularized_count, m.worst_condition, m.total_volume, m.box_volume);
+}
+
+}  // namespace
+
+Model build_model(const Scene& scene) {
+  Model m;
+  m.scene = scene;
+  const NodeCloud cloud = make_node_cloud(scene);
+  m.particle_count = static_cast<int>(cloud.positions.cols());
+  m.rest_position = cloud.positions;
+  m.box_volume = (scene.box.max - scene.box.min).prod();
+  set_material(m);
+  if (scene.model == "mls")
+    build_mls(m, cloud);
+  else if (scene.model == "hex_fem")
+    build_hex_fem(m, cloud);
+  else
+    throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
+  set_boundary_and_indenter(m);
+  spdlog::debug("model {}: {} particles, {} fixed, {} regularised (worst cond {:.3g}), volume {:.4g} of box {:.4g}",
+                scene.model, m.particle_count, m.fixed_count, m.regularized_count, m.worst_condition,
+                m.total_volume, m.box_volume);
   return m;
 }
 

@@ -8,8 +8,10 @@
 
 namespace palpate {
 
-// d = travel of the indenter centre below the height at which the sphere first
-// touches the undeformed body (Model::touch_height), m. Positive when pressing.
+// d = travel of the indenter below the height at which it touches the undeformed
+// surface (Model::touch_height), m. Positive when pressing. On a lattice with the
+// sphere centred between particles this includes the strain-free sinking between
+// them (physics.md §2), as a continuum comparison with Hertz requires.
 double indentation(const Model& model, const State& state);
 
 // Largest particle speed, m/s.

@@ -1,8 +1,9 @@
 #include "core/integrators.h"
 
 #include <cmath>
+#include <cstring>
 
-#include "core/mls_forces.h"
+#include "core/solid.h"
 
 namespace palpate {
 
@@ -11,22 +12,67 @@ void add_contact_forces(const State& state, Points& force) {
     force.col(state.contact_index[c]) += state.contact_force.col(static_cast<Eigen::Index>(c));
 }
 
+namespace {
+
+// Acceleration of particle i from its total force f_i (3 doubles) and velocity v_i:
+// a_i = f_i / m_i - c v_i + g for a free particle, zero for a fixed one.
+struct Acceleration {
+  const double* inverse_mass;
+  double damping;
+  Vec3 gravity;
+  Acceleration(const Model& model)
+      : inverse_mass(model.inverse_mass.data()), damping(model.scene.integrator.damping), gravity(model.scene.gravity) {}
+  Vec3 operator()(int i, const double* f, const double* v) const {
+    const double inv_m = inverse_mass[i];
+    if (inv_m == 0.0) return Vec3::Zero();
+    return Vec3(inv_m * f[0] - damping * v[0] + gravity[0], inv_m * f[1] - damping * v[1] + gravity[1],
+                inv_m * f[2] - damping * v[2] + gravity[2]);
+  }
+};
+
+// The fused update loops below run over groups of four consecutive particles, whose
+// twelve coordinates (x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3) are three Lanes (GCC/Clang
+// vector extension: AVX2/FMA or SSE pairs), and over the remaining particles one
+// coordinate at a time; the per-coordinate formulas are templates on double / Lanes.
+constexpr int kGroup = 4;
+using Lanes = double __attribute__((vector_size(kGroup * sizeof(double))));
+
+template <class T>
+inline T load(const double* p) {
+  T v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+template <class T>
+inline void store(double* p, const T& v) {
+  std::memcpy(p, &v, sizeof v);
+}
+
+// Accelerations of the group of particles 4p ... 4p+3 (Acceleration, four at a time).
+inline void group_accelerations(const Acceleration& acc, int p, const double* f, const double* v, Lanes (&a)[3]) {
+  const double* m = acc.inverse_mass + kGroup * p;
+  const double free[kGroup] = {m[0] != 0.0 ? 1.0 : 0.0, m[1] != 0.0 ? 1.0 : 0.0, m[2] != 0.0 ? 1.0 : 0.0,
+                               m[3] != 0.0 ? 1.0 : 0.0};
+  const Lanes inv_m[3] = {Lanes{m[0], m[0], m[0], m[1]}, Lanes{m[1], m[1], m[2], m[2]}, Lanes{m[2], m[3], m[3], m[3]}};
+  const Lanes is_free[3] = {Lanes{free[0], free[0], free[0], free[1]}, Lanes{free[1], free[1], free[2], free[2]},
+                            Lanes{free[2], free[3], free[3], free[3]}};
+  const Vec3& g = acc.gravity;
+  const Lanes gravity[3] = {Lanes{g[0], g[1], g[2], g[0]}, Lanes{g[1], g[2], g[0], g[1]}, Lanes{g[2], g[0], g[1], g[2]}};
+  for (int q = 0; q < 3; ++q) {
+    const int k = 3 * kGroup * p + kGroup * q;
+    a[q] = inv_m[q] * load<Lanes>(f + k) + is_free[q] * (gravity[q] - acc.damping * load<Lanes>(v + k));
+  }
+}
+
+}  // namespace
+
 void particle_accelerations(const Model& model, const State& state, const Points& x, const Points& v, Points& force,
                             Points& acceleration) {
-  internal_forces(model, x, force);
+  elastic_forces(model, x, force);
   add_contact_forces(state, force);
-  const double c = model.scene.integrator.damping;
-  const Vec3 g = model.scene.gravity;
-  const bool gravity = !g.isZero();
-  for (int i = 0; i < model.particle_count; ++i) {
-    const double inv_m = model.inverse_mass[i];
-    if (inv_m == 0.0) {
-      acceleration.col(i).setZero();
-      continue;
-    }
-    acceleration.col(i) = inv_m * force.col(i) - c * v.col(i);
-    if (gravity) acceleration.col(i) += g;
-  }
+  const Acceleration accel(model);
+  for (int i = 0; i < model.particle_count; ++i)
+    acceleration.col(i) = accel(i, force.col(i).data(), v.col(i).data());
 }
 
 double indenter_free_acceleration(const Model& model, const State& state) {
@@ -44,83 +90,225 @@ void indenter_free_motion(const Model& model, State& state, double dt) {
 
 }  // namespace
 
+namespace {
+
+// One RK4 stage at coordinate k (T = double or Lanes): with the stage's velocity v_s and
+// acceleration a_s, add k_s = (v_s, a_s) with its weight to the sums and form the next
+// stage x_{s+1} = x_0 + h v_s, v_{s+1} = v_0 + h a_s. v_stage may be the stage's own input.
+struct Rk4Stage {
+  const double* x0;
+  const double* v0;
+  const double* v_in;  // v_s
+  double* x_sum;
+  double* v_sum;
+  double* x_next;
+  double* v_next;
+  double h, weight;
+  bool first;
+  template <class T>
+  void operator()(int k, const T& a) const {
+    const T v = load<T>(v_in + k);
+    store(x_sum + k, first ? v : load<T>(x_sum + k) + weight * v);
+    store(v_sum + k, first ? a : load<T>(v_sum + k) + weight * a);
+    store(x_next + k, load<T>(x0 + k) + h * v);
+    store(v_next + k, load<T>(v0 + k) + h * a);
+  }
+};
+
+// The last stage and the update x += dt/6 (k_1 + 2 k_2 + 2 k_3 + k_4), likewise for v.
+struct Rk4Update {
+  const double* v4;
+  const double* x_sum;
+  const double* v_sum;
+  double* x;
+  double* v;
+  double dt_6;
+  template <class T>
+  void operator()(int k, const T& a) const {
+    store(x + k, load<T>(x + k) + dt_6 * (load<T>(x_sum + k) + load<T>(v4 + k)));
+    store(v + k, load<T>(v + k) + dt_6 * (load<T>(v_sum + k) + a));
+  }
+};
+
+// Symplectic Euler at coordinate k: v += dt a; x += dt v.
+struct SymplecticEulerUpdate {
+  double* x;
+  double* v;
+  double dt;
+  template <class T>
+  void operator()(int k, const T& a) const {
+    const T v_new = load<T>(v + k) + dt * a;
+    store(v + k, v_new);
+    store(x + k, load<T>(x + k) + dt * v_new);
+  }
+};
+
+// Calls update(k, a_k) for every coordinate k with the acceleration a(f, v) there.
+template <class Update>
+void for_each_acceleration(const Model& model, const double* f, const double* v, const Update& update) {
+  const Acceleration accel(model);
+  const int n = model.particle_count, groups = n / kGroup;
+  for (int p = 0; p < groups; ++p) {
+    Lanes a[3];
+    group_accelerations(accel, p, f, v, a);
+    for (int q = 0; q < 3; ++q) update(3 * kGroup * p + kGroup * q, a[q]);
+  }
+  for (int i = kGroup * groups; i < n; ++i) {
+    const Vec3 a = accel(i, f + 3 * i, v + 3 * i);
+    for (int c = 0; c < 3; ++c) update(3 * i + c, a[c]);
+  }
+}
+
+}  // namespace
+
 void free_motion_rk4(const Model& model, State& state) {
+  // Classical RK4 on y = (x, v), y' = (v, a(x, v)), with the stages fused: one pass
+  // over the coordinates per stage takes k_s = (v_s, a_s) from the forces at x_s,
+  // adds it to the weighted sum k_1 + 2 k_2 + 2 k_3 and forms the next stage
+  // (x_{s+1}, v_{s+1}) = (x_0, v_0) + h_{s+1} k_s, h = (dt/2, dt/2, dt); the fourth
+  // pass applies the update. state.position, state.velocity hold (x_0, v_0) until then.
   const double dt = model.scene.integrator.dt;
   Workspace& w = state.work;
-  w.x0 = state.position;
-  w.v0 = state.velocity;
-  // Stage s: slope of x is v, slope of v is a(x, v).
-  const double stage_dt[4] = {0.0, 0.5 * dt, 0.5 * dt, dt};
-  for (int s = 0; s < 4; ++s) {
-    if (s == 0) {
-      w.rk_x[0] = w.v0;
-      particle_accelerations(model, state, w.x0, w.v0, w.force, w.rk_v[0]);
-    } else {
-      state.position = w.x0 + stage_dt[s] * w.rk_x[s - 1];
-      state.velocity = w.v0 + stage_dt[s] * w.rk_v[s - 1];
-      w.rk_x[s] = state.velocity;
-      particle_accelerations(model, state, state.position, state.velocity, w.force, w.rk_v[s]);
-    }
+  Points& x_stage = w.rk_x[0];  // x_s
+  Points& v_stage = w.rk_v[0];  // v_s
+  Points& x_sum = w.rk_x[1];    // weighted sum of the position slopes so far
+  Points& v_sum = w.rk_v[1];    // weighted sum of the velocity slopes so far
+  const double next_h[3] = {0.5 * dt, 0.5 * dt, dt};
+  const double weight[3] = {1.0, 2.0, 2.0};
+  for (int s = 0; s < 3; ++s) {
+    const Points& x_s = s == 0 ? state.position : x_stage;
+    const Points& v_s = s == 0 ? state.velocity : v_stage;
+    elastic_forces(model, x_s, w.force);
+    add_contact_forces(state, w.force);
+    const Rk4Stage stage{state.position.data(), state.velocity.data(), v_s.data(), x_sum.data(), v_sum.data(),
+                         x_stage.data(), v_stage.data(), next_h[s], weight[s], s == 0};
+    for_each_acceleration(model, w.force.data(), v_s.data(), stage);
   }
-  state.position = w.x0 + (dt / 6.0) * (w.rk_x[0] + 2.0 * w.rk_x[1] + 2.0 * w.rk_x[2] + w.rk_x[3]);
-  state.velocity = w.v0 + (dt / 6.0) * (w.rk_v[0] + 2.0 * w.rk_v[1] + 2.0 * w.rk_v[2] + w.rk_v[3]);
+  elastic_forces(model, x_stage, w.force);
+  add_contact_forces(state, w.force);
+  const Rk4Update update{v_stage.data(), x_sum.data(), v_sum.data(), state.position.data(), state.velocity.data(),
+                         dt / 6.0};
+  for_each_acceleration(model, w.force.data(), v_stage.data(), update);
   indenter_free_motion(model, state, dt);
-
 }
 
 void free_motion_symplectic_euler(const Model& model, State& state) {
   const double dt = model.scene.integrator.dt;
   Workspace& w = state.work;
-  particle_accelerations(model, state, state.position, state.velocity, w.force, w.rk_v[0]);
-  state.velocity += dt * w.rk_v[0];
-  state.position += dt * state.velocity;
+  elastic_forces(model, state.position, w.force);
+  add_contact_forces(state, w.force);
+  const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt};
+  for_each_acceleration(model, w.force.data(), state.velocity.data(), update);
   state.indenter_velocity += dt * indenter_free_acceleration(model, state);
   state.indenter_center[2] += dt * state.indenter_velocity;
 }
 
-ImplicitEulerOperator::ImplicitEulerOperator(const Model& model, State& state) : model_(model), state_(state) {}
+namespace {
 
-void ImplicitEulerOperator::apply(const Points& p, Points& Ap) {
-  const double dt = model_.scene.integrator.dt;
-  const double mass_factor = 1.0 + dt * model_.scene.integrator.damping;
-  force_differential(model_, state_.work.cached_F, state_.work.cached_S, p, Ap);  // -K p
-  for (int i = 0; i < model_.particle_count; ++i) {
-    if (model_.inverse_mass[i] == 0.0)
-      Ap.col(i).setZero();
-    else
-      Ap.col(i) = mass_factor * model_.mass[i] * p.col(i) - dt * dt * Ap.col(i);
-  }
+// 1 for a free particle, 0 for a fixed one (inverse mass 0), per coordinate.
+inline double free_flag(double inverse_mass) { return inverse_mass != 0.0 ? 1.0 : 0.0; }
+inline Lanes free_flag(const Lanes& inverse_mass) {
+  return -__builtin_convertvector(inverse_mass != 0.0, Lanes);  // comparison lanes are -1 / 0
 }
 
+// A sum over coordinates, four at a time or one at a time.
+struct Sum {
+  Lanes lanes = {};
+  double scalar = 0.0;
+  void add(const Lanes& v) { lanes += v; }
+  void add(double v) { scalar += v; }
+  double total() const { return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]) + scalar; }
+};
+
+// Calls body(k, inverse mass, mass) for every coordinate k, with the particle's inverse
+// mass and mass: twelve coordinates (four particles, T = Lanes) at a time, then the
+// remaining particles one coordinate at a time (T = double).
+template <class Body>
+void for_each_coordinate(const Model& model, const Body& body) {
+  const int n = model.particle_count, groups = n / kGroup;
+  const double* inv_m = model.inverse_mass.data();
+  const double* mass = model.mass.data();
+  auto spread = [](const double* s, int q) {  // the values of particles 4p ... 4p+3 over their coordinates
+    return q == 0 ? Lanes{s[0], s[0], s[0], s[1]} : q == 1 ? Lanes{s[1], s[1], s[2], s[2]} : Lanes{s[2], s[3], s[3], s[3]};
+  };
+  for (int p = 0; p < groups; ++p)
+    for (int q = 0; q < 3; ++q)
+      body(3 * kGroup * p + kGroup * q, spread(inv_m + kGroup * p, q), spread(mass + kGroup * p, q));
+  for (int i = kGroup * groups; i < n; ++i)
+    for (int c = 0; c < 3; ++c) body(3 * i + c, inv_m[i], mass[i]);
+}
+
+// Ap = A p = (1 + dt c) M p + dt^2 K p over the free particles (zero on fixed ones);
+// returns p . Ap.
+double apply_step_operator(const Model& model, State& state, const Points& p, Points& Ap) {
+  const double dt = model.scene.integrator.dt;
+  const double mass_factor = 1.0 + dt * model.scene.integrator.damping;
+  elastic_force_differential(model, state.work, p, Ap);  // -K p
+  const double* P = p.data();
+  double* AP = Ap.data();
+  Sum p_Ap;
+  for_each_coordinate(model, [&](int k, auto inv_m, auto mass) {
+    using T = decltype(inv_m);
+    const T p_k = load<T>(P + k);
+    const T Ap_k = free_flag(inv_m) * (mass_factor * mass * p_k - dt * dt * load<T>(AP + k));
+    store(AP + k, Ap_k);
+    p_Ap.add(p_k * Ap_k);
+  });
+  return p_Ap.total();
+}
+
+}  // namespace
+
+ImplicitEulerOperator::ImplicitEulerOperator(const Model& model, State& state) : model_(model), state_(state) {}
+
+void ImplicitEulerOperator::apply(const Points& p, Points& Ap) { apply_step_operator(model_, state_, p, Ap); }
+
 int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x) {
+  // Preconditioned CG with the Jacobi preconditioner of the mass part, z = r / ((1 + dt c) m),
+  // in three passes per iteration: A p (with p . A p), then x, r and r . r, r . z, then p.
   Workspace& w = state_.work;
   const double dt = model_.scene.integrator.dt;
-  const double mass_factor = 1.0 + dt * model_.scene.integrator.damping;
-  const int n = model_.particle_count;
-  x.setZero();
-  w.cg_r = b;
-  for (int i = 0; i < n; ++i)
-    if (model_.inverse_mass[i] == 0.0) w.cg_r.col(i).setZero();
-  const double b_norm = w.cg_r.norm();
+  const double inv_mass_factor = 1.0 / (1.0 + dt * model_.scene.integrator.damping);
+  const double* B = b.data();
+  double* X = x.data();
+  double* R = w.cg_r.data();
+  double* P = w.cg_p.data();
+  const double* AP = w.cg_Ap.data();
+  // x = 0, r = b over the free particles, p = z.
+  Sum r_r, r_z;
+  for_each_coordinate(model_, [&](int k, auto inv_m, auto) {
+    using T = decltype(inv_m);
+    const T r = free_flag(inv_m) * load<T>(B + k);
+    const T z = (inv_m * inv_mass_factor) * r;
+    store(X + k, T{});
+    store(R + k, r);
+    store(P + k, z);
+    r_r.add(r * r);
+    r_z.add(r * z);
+  });
+  const double b_norm = std::sqrt(r_r.total());
   if (b_norm == 0.0) return 0;
-  auto precondition = [&](const Points& r, Points& z) {  // Jacobi on the mass part
-    for (int i = 0; i < n; ++i) z.col(i) = r.col(i) * (model_.inverse_mass[i] / mass_factor);
-  };
-  precondition(w.cg_r, w.cg_z);
-  w.cg_p = w.cg_z;
-  double rz = (w.cg_r.array() * w.cg_z.array()).sum();
+  double rz = r_z.total();
   const double tolerance = model_.scene.integrator.cg_tolerance * b_norm;
   const int max_iterations = model_.scene.integrator.cg_max_iterations;
   for (int it = 1; it <= max_iterations; ++it) {
-    apply(w.cg_p, w.cg_Ap);
-    const double alpha = rz / (w.cg_p.array() * w.cg_Ap.array()).sum();
-    x += alpha * w.cg_p;
-    w.cg_r -= alpha * w.cg_Ap;
-    if (w.cg_r.norm() <= tolerance) return it;
-    precondition(w.cg_r, w.cg_z);
-    const double rz_next = (w.cg_r.array() * w.cg_z.array()).sum();
-    w.cg_p = w.cg_z + (rz_next / rz) * w.cg_p;
-    rz = rz_next;
+    const double alpha = rz / apply_step_operator(model_, state_, w.cg_p, w.cg_Ap);
+    Sum r_r_next, r_z_next;
+    for_each_coordinate(model_, [&](int k, auto inv_m, auto) {
+      using T = decltype(inv_m);
+      store(X + k, load<T>(X + k) + alpha * load<T>(P + k));
+      const T r = load<T>(R + k) - alpha * load<T>(AP + k);
+      store(R + k, r);
+      r_r_next.add(r * r);
+      r_z_next.add((inv_m * inv_mass_factor) * r * r);
+    });
+    if (std::sqrt(r_r_next.total()) <= tolerance) return it;
+    const double beta = r_z_next.total() / rz;
+    for_each_coordinate(model_, [&](int k, auto inv_m, auto) {
+      using T = decltype(inv_m);
+      store(P + k, (inv_m * inv_mass_factor) * load<T>(R + k) + beta * load<T>(P + k));
+    });
+    rz = r_z_next.total();
   }
   return -1;
 }
@@ -132,10 +320,10 @@ void free_motion_implicit_euler(const Model& model, State& state) {
   const double c = model.scene.integrator.damping;
   Workspace& w = state.work;
   const Vec3 g = model.scene.gravity;
-  linearize_forces(model, state.position, w.cached_F, w.cached_S);
-  internal_forces(model, state.position, w.force);
+  linearize_elastic(model, state.position, w);
+  elastic_forces(model, state.position, w.force);
   add_contact_forces(state, w.force);
-  force_differential(model, w.cached_F, w.cached_S, state.velocity, w.cg_Ap);  // -K v
+  elastic_force_differential(model, w, state.velocity, w.cg_Ap);  // -K v
   for (int i = 0; i < model.particle_count; ++i) {
     const double m_i = model.mass[i];
     w.rhs.col(i) = dt * (w.force.col(i) + m_i * g - c * m_i * state.velocity.col(i)) + dt * dt * w.cg_Ap.col(i);

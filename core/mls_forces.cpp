@@ -176,12 +176,18 @@ void force_differential_per_particle(const Model& m, const double* cached_F, con
 // in lane order, so a particle shared by two lanes is updated correctly.
 // ---------------------------------------------------------------------------
 
+// Loops over lanes and matrix entries have fixed, small trip counts; unrolled, every
+// Lanes value is a register (GCC does not unroll all of them at -O2 by itself).
+#define PALPATE_UNROLL _Pragma("GCC unroll 16")
+// The helpers of one block are inlined into its loop, so that its matrices stay in registers.
+#define PALPATE_INLINE [[gnu::always_inline]] inline
+
 constexpr int kLanes = Model::block_width;
 using Lanes = double __attribute__((vector_size(kLanes * sizeof(double))));
 using Slot = Model::NeighborSlot;
 using Block = Model::ParticleBlock;
 
-inline Lanes load(const double* p) {  // kLanes consecutive doubles (any alignment)
+PALPATE_INLINE Lanes load(const double* p) {  // kLanes consecutive doubles (any alignment)
   Lanes v;
   std::memcpy(&v, p, sizeof v);
   return v;
@@ -195,28 +201,45 @@ struct Mat3Lanes {
 };
 
 // Component c of the 3-vectors of particles i_0 ... i_3 (column-major 3 x n data).
-inline Lanes gather(const double* x, const int (&i)[kLanes], int c) {
-  return Lanes{x[3 * i[0] + c], x[3 * i[1] + c], x[3 * i[2] + c], x[3 * i[3] + c]};
+PALPATE_INLINE Lanes gather(const double* x, const int (&i)[kLanes], int c) {
+  const double *x0 = x + 3 * static_cast<ptrdiff_t>(i[0]), *x1 = x + 3 * static_cast<ptrdiff_t>(i[1]),
+               *x2 = x + 3 * static_cast<ptrdiff_t>(i[2]), *x3 = x + 3 * static_cast<ptrdiff_t>(i[3]);
+  return Lanes{x0[c], x1[c], x2[c], x3[c]};
+}
+
+// f_{i_l} -= g_l for the first `lanes` lanes, one particle after the other (two lanes
+// may name the same particle).
+PALPATE_INLINE void subtract_lanes(double* f, const int (&i)[kLanes], const Lanes (&g)[3], int lanes = kLanes) {
+  PALPATE_UNROLL
+  for (int l = 0; l < lanes; ++l) {
+    double* fi = f + 3 * static_cast<ptrdiff_t>(i[l]);
+    fi[0] -= g[0][l];
+    fi[1] -= g[1][l];
+    fi[2] -= g[2][l];
+  }
 }
 
 // The particles of block b (padding lanes repeat the last particle).
-inline void block_particles(int b, int n, int (&i)[kLanes]) {
+PALPATE_INLINE void block_particles(int b, int n, int (&i)[kLanes]) {
+  PALPATE_UNROLL
   for (int l = 0; l < kLanes; ++l) i[l] = std::min(kLanes * b + l, n - 1);
 }
 
 // Entries of a per-particle 3x3 cache (9 x n, column-major per particle) as Lanes.
-inline void gather_matrices(const double* cache, const int (&i)[kLanes], Mat3Lanes& M) {
-  for (int k = 0; k < 9; ++k)
-    M.m[k] = Lanes{cache[9 * static_cast<size_t>(i[0]) + k], cache[9 * static_cast<size_t>(i[1]) + k],
-                   cache[9 * static_cast<size_t>(i[2]) + k], cache[9 * static_cast<size_t>(i[3]) + k]};
+PALPATE_INLINE void gather_matrices(const double* cache, const int (&i)[kLanes], Mat3Lanes& M) {
+  const double *M0 = cache + 9 * static_cast<ptrdiff_t>(i[0]), *M1 = cache + 9 * static_cast<ptrdiff_t>(i[1]),
+               *M2 = cache + 9 * static_cast<ptrdiff_t>(i[2]), *M3 = cache + 9 * static_cast<ptrdiff_t>(i[3]);
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) M.m[k] = Lanes{M0[k], M1[k], M2[k], M3[k]};
 }
 
 // Adds sum_j (x_j - x_i) d_j^T over the block's slots to F (A-9; also dF from dx).
-inline void add_gradient(const Slot* slot, const Slot* end, const double* __restrict x, const int (&i)[kLanes],
+PALPATE_INLINE void add_gradient(const Slot* slot, const Slot* end, const double* __restrict x, const int (&i)[kLanes],
                          Mat3Lanes& F) {
   const Lanes xi[3] = {gather(x, i, 0), gather(x, i, 1), gather(x, i, 2)};
   for (; slot != end; ++slot) {
     const Lanes d0 = load(slot->d[0]), d1 = load(slot->d[1]), d2 = load(slot->d[2]);
+    PALPATE_UNROLL
     for (int r = 0; r < 3; ++r) {
       const Lanes x_ij = gather(x, slot->j, r) - xi[r];
       F(r, 0) += x_ij * d0;
@@ -226,36 +249,32 @@ inline void add_gradient(const Slot* slot, const Slot* end, const double* __rest
   }
 }
 
+// g = T d for the block's stresses T and weights d (d[c] = component c of the four lanes).
+PALPATE_INLINE void stress_times_weight(const Mat3Lanes& T, const double (&d)[3][kLanes], Lanes (&g)[3]) {
+  const Lanes d0 = load(d[0]), d1 = load(d[1]), d2 = load(d[2]);
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r) g[r] = T(r, 0) * d0 + T(r, 1) * d1 + T(r, 2) * d2;
+}
+
 // Forces of the block's stresses T = v_i P_i: f_j -= T d_j on every
-// neighbour, f_i += T sum_j d_j (= -T d_i) on the particle itself. Padding slots have
-// d = 0 and add nothing; padding lanes (i >= n) are not written.
-inline void scatter_forces(const Slot* slot, const Slot* end, const Mat3Lanes& T, int b, int n,
-                           double* __restrict f) {
-  Lanes fi[3] = {};
+// neighbour and f_i -= T d_i on the particle itself. Padding slots have d = 0 and
+// add nothing; padding lanes (i >= n) are not written.
+PALPATE_INLINE void scatter_forces(const Block& block, const Slot* slot, const Slot* end, const Mat3Lanes& T,
+                           const int (&i)[kLanes], int lanes, double* __restrict f) {
+  Lanes g[3];
   for (; slot != end; ++slot) {
-    const Lanes d0 = load(slot->d[0]), d1 = load(slot->d[1]), d2 = load(slot->d[2]);
-    Lanes g[3];
-    for (int r = 0; r < 3; ++r) {
-      g[r] = T(r, 0) * d0 + T(r, 1) * d1 + T(r, 2) * d2;
-      fi[r] += g[r];
-    }
-    for (int l = 0; l < kLanes; ++l) {
-      double* fj = f + 3 * slot->j[l];
-      fj[0] -= g[0][l];
-      fj[1] -= g[1][l];
-      fj[2] -= g[2][l];
-    }
+    stress_times_weight(T, slot->d, g);
+    subtract_lanes(f, slot->j, g);
   }
-  const int lanes = std::min(kLanes, n - kLanes * b);
-  for (int l = 0; l < lanes; ++l)
-    for (int r = 0; r < 3; ++r) f[3 * (kLanes * b + l) + r] += fi[r][l];
+  stress_times_weight(T, block.self_weight, g);
+  subtract_lanes(f, i, g, lanes);
 }
 
 // v_i P_i for the four particles of a block, from F_i: Green strain E = 1/2 (F^T F - I)
 // St Venant-Kirchhoff S = lambda tr(E) I + 2 mu E, P = F S, plus the volume
 // term k_v (J - 1) cof F when volume_term. The volume v_i is folded into S.
 template <bool volume_term>
-inline void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+PALPATE_INLINE void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
   auto FtF = [&](int a, int b) { return F(0, a) * F(0, b) + F(1, a) * F(1, b) + F(2, a) * F(2, b); };
   const Lanes E00 = 0.5 * FtF(0, 0) - 0.5, E11 = 0.5 * FtF(1, 1) - 0.5, E22 = 0.5 * FtF(2, 2) - 0.5;
   const Lanes E01 = 0.5 * FtF(0, 1), E02 = 0.5 * FtF(0, 2), E12 = 0.5 * FtF(1, 2);
@@ -268,12 +287,16 @@ inline void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lane
   vS(0, 1) = vS(1, 0) = v_2mu * E01;
   vS(0, 2) = vS(2, 0) = v_2mu * E02;
   vS(1, 2) = vS(2, 1) = v_2mu * E12;
+  PALPATE_UNROLL
   for (int r = 0; r < 3; ++r)
+    PALPATE_UNROLL
     for (int c = 0; c < 3; ++c) vP(r, c) = F(r, 0) * vS(0, c) + F(r, 1) * vS(1, c) + F(r, 2) * vS(2, c);
   if constexpr (volume_term) {  // P += k_v (J - 1) cof F, cof F columns = F columns crossed pairwise
     Mat3Lanes C;
+    PALPATE_UNROLL
     for (int c = 0; c < 3; ++c) {
       const int a = (c + 1) % 3, b = (c + 2) % 3;
+      PALPATE_UNROLL
       for (int r = 0; r < 3; ++r) {
         const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
         C(r, c) = F(r1, a) * F(r2, b) - F(r2, a) * F(r1, b);
@@ -281,6 +304,7 @@ inline void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lane
     }
     const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
     const Lanes scale = (m.volume_stiffness * v) * (J - 1.0);
+    PALPATE_UNROLL
     for (int k = 0; k < 9; ++k) vP.m[k] += scale * C.m[k];
   }
 }
@@ -289,7 +313,7 @@ inline void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lane
 // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS, and for the
 // volume term k_v [(cof F : dF) cof F + (J - 1) d cof F].
 template <bool volume_term>
-inline void weighted_piola_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& S, const Mat3Lanes& dF,
+PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& S, const Mat3Lanes& dF,
                                         const Lanes v, Mat3Lanes& vdP) {
   auto FtdF = [&](int a, int b) { return F(0, a) * dF(0, b) + F(1, a) * dF(1, b) + F(2, a) * dF(2, b); };
   const Lanes dE00 = FtdF(0, 0), dE11 = FtdF(1, 1), dE22 = FtdF(2, 2);
@@ -305,14 +329,18 @@ inline void weighted_piola_differential(const Model& m, const Mat3Lanes& F, cons
   dS(0, 2) = dS(2, 0) = two_mu * dE02;
   dS(1, 2) = dS(2, 1) = two_mu * dE12;
   Mat3Lanes dP;
+  PALPATE_UNROLL
   for (int r = 0; r < 3; ++r)
+    PALPATE_UNROLL
     for (int c = 0; c < 3; ++c)
       dP(r, c) = dF(r, 0) * S(0, c) + dF(r, 1) * S(1, c) + dF(r, 2) * S(2, c) + F(r, 0) * dS(0, c) +
                  F(r, 1) * dS(1, c) + F(r, 2) * dS(2, c);
   if constexpr (volume_term) {
     Mat3Lanes C, dC;  // cof F and its differential (columns of F, dF crossed pairwise)
+    PALPATE_UNROLL
     for (int c = 0; c < 3; ++c) {
       const int a = (c + 1) % 3, b = (c + 2) % 3;
+      PALPATE_UNROLL
       for (int r = 0; r < 3; ++r) {
         const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
         C(r, c) = F(r1, a) * F(r2, b) - F(r2, a) * F(r1, b);
@@ -321,9 +349,12 @@ inline void weighted_piola_differential(const Model& m, const Mat3Lanes& F, cons
     }
     const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
     Lanes C_dF = C.m[0] * dF.m[0];
+    PALPATE_UNROLL
     for (int k = 1; k < 9; ++k) C_dF += C.m[k] * dF.m[k];
+    PALPATE_UNROLL
     for (int k = 0; k < 9; ++k) dP.m[k] += m.volume_stiffness * (C_dF * C.m[k] + (J - 1.0) * dC.m[k]);
   }
+  PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
 
@@ -337,11 +368,12 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
     int i[kLanes];
     block_particles(b, n, i);
     Mat3Lanes F;  // F_i = C_i + sum_j (x_j - x_i) d_j^T
+    PALPATE_UNROLL
     for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
     add_gradient(begin, end, x, i, F);
     Mat3Lanes vP;
     weighted_piola_stress<volume_term>(m, F, load(block.volume), vP);
-    scatter_forces(begin, end, vP, b, n, f);
+    scatter_forces(block, begin, end, vP, i, std::min(kLanes, n - kLanes * b), f);
   }
 }
 
@@ -361,7 +393,7 @@ void force_differential_blocked(const Model& m, const double* cached_F, const do
     gather_matrices(cached_F, i, F);
     gather_matrices(cached_S, i, S);
     weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
-    scatter_forces(begin, end, vdP, b, n, df);
+    scatter_forces(block, begin, end, vdP, i, std::min(kLanes, n - kLanes * b), df);
   }
 }
 
@@ -429,16 +461,22 @@ void force_differential(const Model& m, const std::vector<double>& cached_F,
 }
 
 double internal_forces_flops(const Model& m) {
-  // Per neighbour pair: F accumulation 3 sub + 9 fma (21 flops), force 3 mul + 6 fma,
-  // 3 sub on f_j and 3 add on f_i (21 flops).
-  // Per particle: F^T F 6 x (mul + 2 fma) = 30, E 6 fma/mul, trace 2, v lambda tr E, 2 mu v 2,
-  // v S 3 fma + 3 mul = 9, P = F (v S) 9 x (mul + 2 fma) = 45, f_i 3: about 100 flops.
-  const double nnz = m.neighbor_offset.back();
-  double flops = nnz * 42.0 + m.particle_count * 100.0;
-  // Cofactor 9 x (mul + fma) = 27, J 5, scale 3, P += 18.
-  if (m.volume_stiffness > 0) flops += m.particle_count * 53.0;
-  if (!m.hourglass_weight.empty()) flops += nnz * 60.0;
-  return flops;
+  // Floating-point operations (an FMA counts two) of the arithmetic the force loop
+  // needs, as the code does it; padding slots and lanes of the blocked loop are not counted.
+  const double nnz = m.neighbor_offset.back(), n = m.particle_count;
+  if (use_blocks(m)) {
+    // Per neighbour pair: F += (x_j - x_i) d_j^T 3 sub + 9 fma = 21; g = T d_j 3 x (mul + 2 fma)
+    // = 15; f_j -= g 3: 39.
+    // Per particle: F^T F 6 x (mul + 2 fma) = 30; E 3 fma + 3 mul = 9; lambda v tr E 4, 2 mu v 1;
+    // v S 3 fma + 3 mul = 9; P = F (v S) 9 x (mul + 2 fma) = 45; f_i -= T d_i 15 + 3: 116.
+    // Volume term per particle: cof F 9 x (mul + fma) = 27, J 5, k_v v (J - 1) 3, P += 9 fma 18: 53.
+    return nnz * 39.0 + n * (116.0 + (m.volume_stiffness > 0 ? 53.0 : 0.0));
+  }
+  // Per particle loop: per pair 21 (F) + 15 (T d_j) + 3 (f_j) + 3 (f_i sum) = 42, per particle about
+  // 130 (E, S, P with Eigen 3x3 products; energy density) plus the volume term, and the hourglass
+  // residuals r_ij = x_ij - F X_ij, G += kw r X^T and its direct forces: about 60 per pair.
+  return nnz * (42.0 + (m.hourglass_weight.empty() ? 0.0 : 60.0)) +
+         n * (130.0 + (m.volume_stiffness > 0 ? 60.0 : 0.0));
 }
 
 }  // namespace palpate

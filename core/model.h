@@ -5,13 +5,17 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/hex_fem.h"
 #include "core/scene.h"
 #include "core/types.h"
 
 namespace palpate {
 
+enum class SolidKind { mls, hex_fem };
+
 struct Model {
   Scene scene;  // the description this model was built from
+  SolidKind solid = SolidKind::mls;  // which elastic model the particles (nodes) belong to
 
   int particle_count = 0;
   Points rest_position;  // 3 x n, X_i, m
@@ -43,6 +47,7 @@ struct Model {
   };
   struct ParticleBlock {
     alignas(32) double rest_correction[9][block_width];  // C_i entry k (column-major 3x3) of lane l
+    double self_weight[3][block_width];                  // d_i = -sum_j d_j, as NeighborSlot::d
     double volume[block_width];                          // v_i, m^3; 0 in padding lanes
     int slot_begin = 0, slot_end = 0;                    // its slots in block_slots
   };
@@ -53,6 +58,9 @@ struct Model {
   std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
   Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)
 
+  // Hexahedral FEM (solid == hex_fem only; particles are the lattice nodes).
+  HexMesh hex;
+
   // Material.
   double lame_lambda = 0.0;       // Pa
   double lame_mu = 0.0;           // Pa
@@ -62,7 +70,8 @@ struct Model {
   double indenter_radius = 0.0;   // m
   double indenter_mass = 0.0;     // kg
   Vec3 indenter_start{0, 0, 0};   // initial centre, m
-  double touch_height = 0.0;      // z of the centre when it first touches the undeformed body, m
+  double touch_height = 0.0;      // z of the centre when the sphere touches the undeformed surface
+                                  // (the highest particle under it) with its lowest point, m
 
   // Diagnostics of the build.
   int regularized_count = 0;      // particles whose moment matrix needed regularisation

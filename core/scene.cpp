@@ -44,7 +44,12 @@ struct Named {
   T value;
 };
 
-constexpr std::string_view kModels[] = {"mls"};  // a later issue adds "hex_fem"
+constexpr std::string_view kModels[] = {"mls", "hex_fem"};
+
+constexpr Named<HexFormulation> kHexFormulations[] = {
+    {"linear", HexFormulation::linear},
+    {"corotational", HexFormulation::corotational},
+};
 
 constexpr Named<DistributionType> kDistributions[] = {
     {"grid", DistributionType::grid},
@@ -375,6 +380,11 @@ void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
         "(or a grid distribution)");
 }
 
+void read_hex_fem(const Reader& r, HexFemSpec& h) {
+  r.object({"formulation"});
+  r["formulation"].get(h.formulation, "formulation", kHexFormulations);
+}
+
 void read_material(const Reader& r, MaterialSpec& m) {
   r.object({"young_modulus", "poisson_ratio", "density", "volume_stiffness"});
   r["young_modulus"].get(m.young_modulus, open_closed(0.0, 1e12));
@@ -438,12 +448,15 @@ void read_verify(const Reader& r, VerifySpec& v) {
 }
 
 void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
-  r.object({"name", "model", "body", "mls", "material", "fixed", "indenter", "contact", "integrator", "gravity",
-            "verify"});
+  r.object({"name", "model", "body", "mls", "hex_fem", "material", "fixed", "indenter", "contact", "integrator",
+            "gravity", "verify"});
   r["name"].get(s.name);
   if (const auto* m = r["model"].pick("model", kModels)) s.model = *m;
   read_body(r["body"], base_dir, s);
   read_mls(r["mls"], s.distribution.type, s.mls);
+  read_hex_fem(r["hex_fem"], s.hex_fem);
+  if (s.model == "hex_fem" && s.distribution.type != DistributionType::grid)
+    r["body"]["distribution"]["type"].fail("the hex_fem model meshes a lattice: use a 'grid' distribution");
   read_material(r["material"], s.material);
   read_fixed(r["fixed"], s.fixed_faces);
   read_indenter(r["indenter"], s.indenter);

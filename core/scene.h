@@ -66,6 +66,12 @@ struct MlsSpec {
   double regularization = 1e-6;  // relative eigenvalue floor of the moment matrix
 };
 
+// The hexahedral FEM reference model (model "hex_fem", physics.md §5).
+enum class HexFormulation { linear, corotational };
+struct HexFemSpec {
+  HexFormulation formulation = HexFormulation::linear;  // small strain, or corotational ("large")
+};
+
 struct MaterialSpec {
   double young_modulus = 1.0e4;   // Pa
   double poisson_ratio = 0.3;
@@ -110,10 +116,11 @@ struct VerifySpec {
 struct Scene {
   std::string name;
   std::string source;        // where the scene came from (file path), for messages
-  std::string model = "mls";
+  std::string model = "mls";  // "mls" (the meshless solid) or "hex_fem" (the FEM reference)
   BoxSpec box;
   DistributionSpec distribution;
   MlsSpec mls;
+  HexFemSpec hex_fem;
   MaterialSpec material;
   uint32_t fixed_faces = face_bottom | faces_sides;
   IndenterSpec indenter;

@@ -7,7 +7,7 @@
 
 #include "core/contact.h"
 #include "core/indentation.h"
-#include "core/mls_forces.h"
+#include "core/solid.h"
 #include "core/state.h"
 #include "core/step.h"
 #include "test_util.h"
@@ -40,8 +40,8 @@ TEST(SignoriniLcp, SolutionIsComplementaryOnRandomSpdProblems) {
   }
 }
 
-std::string pressed_block(const std::string& integrator, double dt) {
-  return R"({"body": {"box": {"min": [-0.5,-0.5,-1], "max": [0.5,0.5,0]},
+std::string pressed_block(const std::string& integrator, double dt, const std::string& model = "mls") {
+  return R"({"model": ")" + model + R"(", "body": {"box": {"min": [-0.5,-0.5,-1], "max": [0.5,0.5,0]},
                       "distribution": {"type": "grid", "per_edge": 8}},
              "mls": {"volumes": "lattice"},
              "material": {"young_modulus": 10000, "poisson_ratio": 0.3, "density": 1000},
@@ -60,9 +60,9 @@ double min_gap(const Model& m, const State& s) {
   return gap;
 }
 
-void press_release(const std::string& integrator, double dt) {
-  SCOPED_TRACE(integrator);
-  const Model m = test::model_from_json(pressed_block(integrator, dt));
+void press_release(const std::string& integrator, double dt, const std::string& model = "mls") {
+  SCOPED_TRACE(integrator + " " + model);
+  const Model m = test::model_from_json(pressed_block(integrator, dt, model));
   State s = make_state(m);
   const double force = 20.0;
   s.force_command = force;
@@ -92,7 +92,7 @@ void press_release(const std::string& integrator, double dt) {
   // are in equilibrium with the contact, so the fixed particles' internal forces
   // balance the command (an independent global balance).
   Points f(3, m.particle_count);
-  internal_forces(m, s.position, f);
+  elastic_forces(m, s.position, f);
   Vec3 support = Vec3::Zero();
   double free_residual = 0;
   for (int i = 0; i < m.particle_count; ++i) {
@@ -117,6 +117,8 @@ void press_release(const std::string& integrator, double dt) {
 TEST(SphereContact, SymplecticEuler) { press_release("symplectic_euler", 1e-3); }
 TEST(SphereContact, Rk4) { press_release("rk4", 1e-3); }
 TEST(SphereContact, ImplicitEuler) { press_release("implicit_euler", 1e-2); }
+TEST(SphereContact, HexFemImplicitEuler) { press_release("implicit_euler", 1e-2, "hex_fem"); }
+TEST(SphereContact, HexFemSymplecticEuler) { press_release("symplectic_euler", 1e-3, "hex_fem"); }
 
 }  // namespace
 }  // namespace palpate

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <vector>
 
-#include "core/mls_forces.h"
+#include "core/solid.h"
 #include "core/state.h"
 #include "core/step.h"
 #include "test_util.h"
@@ -30,7 +30,7 @@ std::string free_cube(const std::string& integrator, double dt, double damping =
 double total_energy(const Model& m, const State& s) {
   double kinetic = 0;
   for (int i = 0; i < m.particle_count; ++i) kinetic += 0.5 * m.mass[i] * s.velocity.col(i).squaredNorm();
-  return kinetic + strain_energy(m, s.position);
+  return kinetic + elastic_energy(m, s.position);
 }
 
 // A smooth initial velocity field (a twist plus a stretch), 0.05 m/s.

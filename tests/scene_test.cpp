@@ -112,7 +112,7 @@ TEST(Scene, ShippedHertzCube) {
   EXPECT_EQ(s.distribution.per_edge, 18);
   EXPECT_EQ(s.mls.neighbors, 16);
   EXPECT_EQ(s.mls.support_factor, 1.0);
-  EXPECT_EQ(s.mls.volumes, VolumeRule::lattice);
+  EXPECT_EQ(s.mls.volumes, VolumeRule::kernel);
   EXPECT_EQ(s.material.young_modulus, 1e4);
   EXPECT_EQ(s.material.poisson_ratio, 0.3);
   EXPECT_EQ(s.material.density, 1000.0);
@@ -231,7 +231,7 @@ TEST(SceneErrors, UnknownTopLevelField) {
   const SceneError e = error_of(R"({"materials": {}})");
   EXPECT_EQ(e.field(), "/materials");
   EXPECT_EQ(e.reason(),
-            "unknown field (known: name, model, body, mls, material, fixed, indenter, contact, integrator, gravity, "
+            "unknown field (known: name, model, body, mls, hex_fem, material, fixed, indenter, contact, integrator, gravity, "
             "verify)");
 }
 
@@ -358,7 +358,7 @@ TEST(SceneErrors, BadEnums) {
 
   e = error_of(R"({"model": "fem"})");
   EXPECT_EQ(e.field(), "/model");
-  EXPECT_EQ(e.reason(), "unknown model 'fem' (known: mls)");
+  EXPECT_EQ(e.reason(), "unknown model 'fem' (known: mls, hex_fem)");
 }
 
 TEST(SceneErrors, Vectors) {
@@ -589,6 +589,37 @@ TEST(SceneFixed, UnknownFaceNamesItsIndex) {
 TEST(SceneFixed, OverrideFixedFaces) {
   EXPECT_EQ(parse("{}", {{"fixed", "[]"}}).fixed_faces, 0u);
   EXPECT_EQ(parse("{}", {{"fixed", R"(["bottom"])"}}).fixed_faces, face_bottom);
+}
+
+}  // namespace
+}  // namespace palpate
+
+namespace palpate {
+namespace {
+
+TEST(SceneHexFem, ModelAndFormulationParse) {
+  const Scene s = parse_scene(R"({"model": "hex_fem", "hex_fem": {"formulation": "corotational"}})", "t.json", ".");
+  EXPECT_EQ(s.model, "hex_fem");
+  EXPECT_EQ(s.hex_fem.formulation, HexFormulation::corotational);
+  const Scene shipped = load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/hertz_cube_fem.json");
+  EXPECT_EQ(shipped.model, "hex_fem");
+  EXPECT_EQ(shipped.integrator.type, IntegratorType::implicit_euler);
+}
+
+TEST(SceneHexFem, RejectsNonLatticeCloudsAndUnknownFormulations) {
+  try {
+    parse_scene(R"({"model": "hex_fem", "body": {"distribution": {"type": "jittered_grid"}}})", "t.json", ".");
+    FAIL();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/body/distribution/type");
+  }
+  try {
+    parse_scene(R"({"hex_fem": {"formulation": "large"}})", "t.json", ".");
+    FAIL();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/hex_fem/formulation");
+    EXPECT_NE(e.reason().find("linear, corotational"), std::string::npos) << e.reason();
+  }
 }
 
 }  // namespace

@@ -1,0 +1,171 @@
+#include "core/hex_fem.h"
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <map>
+#include <stdexcept>
+
+namespace palpate {
+
+namespace {
+
+// Natural coordinates of the 8 nodes in the local order.
+constexpr int kCorner[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
+                               {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
+
+using ElementVector = Eigen::Matrix<double, 24, 1>;
+
+// Gathers the element's node positions minus their rest positions, in the frame R
+// (u'_a = R^T x_a - X_a).
+inline ElementVector element_displacement(const Points& rest, const Points& x, const std::array<int, 8>& nodes,
+                                          const Mat3* R) {
+  ElementVector u;
+  for (int a = 0; a < 8; ++a) {
+    const Vec3 xa = x.col(nodes[a]);
+    u.segment<3>(3 * a) = (R ? Vec3(R->transpose() * xa) : xa) - rest.col(nodes[a]);
+  }
+  return u;
+}
+
+}  // namespace
+
+ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu) {
+  // Isotropic elasticity in Voigt form (engineering shear strains): the shear
+  // entries are mu, not 2 mu.
+  Eigen::Matrix<double, 6, 6> C = Eigen::Matrix<double, 6, 6>::Zero();
+  C.topLeftCorner<3, 3>().setConstant(lambda);
+  C.topLeftCorner<3, 3>().diagonal().array() += 2 * mu;
+  C.bottomRightCorner<3, 3>().diagonal().setConstant(mu);
+  const double g = 1.0 / std::sqrt(3.0);
+  const double detJ = size.prod() / 8.0;  // the map from [-1, 1]^3
+  ElementMatrix K = ElementMatrix::Zero();
+  for (int q = 0; q < 8; ++q) {  // Gauss points (+-g)^3, weights 1
+    const double xi[3] = {g * kCorner[q][0], g * kCorner[q][1], g * kCorner[q][2]};
+    Eigen::Matrix<double, 6, 24> B = Eigen::Matrix<double, 6, 24>::Zero();
+    for (int a = 0; a < 8; ++a) {
+      double dN[3];  // dN_a/dx_c = dN_a/dxi_c * 2 / h_c
+      for (int c = 0; c < 3; ++c) {
+        double v = 0.125 * kCorner[a][c];
+        for (int o = 0; o < 3; ++o)
+          if (o != c) v *= 1.0 + xi[o] * kCorner[a][o];
+        dN[c] = v * 2.0 / size[c];
+      }
+      B(0, 3 * a + 0) = dN[0];
+      B(1, 3 * a + 1) = dN[1];
+      B(2, 3 * a + 2) = dN[2];
+      B(3, 3 * a + 0) = dN[1];  // gamma_xy
+      B(3, 3 * a + 1) = dN[0];
+      B(4, 3 * a + 1) = dN[2];  // gamma_yz
+      B(4, 3 * a + 2) = dN[1];
+      B(5, 3 * a + 0) = dN[2];  // gamma_zx
+      B(5, 3 * a + 2) = dN[0];
+    }
+    K += B.transpose() * C * B * detJ;
+  }
+  return 0.5 * (K + K.transpose());
+}
+
+HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lambda, double mu,
+                 HexFormulation formulation) {
+  const int nx = per_axis[0], ny = per_axis[1], nz = per_axis[2];
+  if (static_cast<long>(nx) * ny * nz != rest.cols())
+    throw std::invalid_argument("hex_mesh: node count does not match the lattice size");
+  HexMesh mesh;
+  mesh.formulation = formulation;
+  // Distinct element sizes share one stiffness matrix (a regular grid has one).
+  std::map<std::array<long long, 3>, int> type_of_size;
+  auto node = [&](int a, int b, int c) { return a + nx * (b + ny * c); };
+  for (int c = 0; c + 1 < nz; ++c)
+    for (int b = 0; b + 1 < ny; ++b)
+      for (int a = 0; a + 1 < nx; ++a) {
+        const std::array<int, 8> nodes = {node(a, b, c),         node(a + 1, b, c),     node(a + 1, b + 1, c),
+                                          node(a, b + 1, c),     node(a, b, c + 1),     node(a + 1, b, c + 1),
+                                          node(a + 1, b + 1, c + 1), node(a, b + 1, c + 1)};
+        const Vec3 size(rest(0, nodes[1]) - rest(0, nodes[0]), rest(1, nodes[3]) - rest(1, nodes[0]),
+                        rest(2, nodes[4]) - rest(2, nodes[0]));
+        // Key on the size rounded to 1e-12 of the largest edge so equal bricks share K_e.
+        const double unit = 1e-12 * size.maxCoeff();
+        const std::array<long long, 3> key = {std::llround(size[0] / unit), std::llround(size[1] / unit),
+                                              std::llround(size[2] / unit)};
+        auto [it, inserted] = type_of_size.emplace(key, static_cast<int>(mesh.element_size.size()));
+        if (inserted) {
+          mesh.element_size.push_back(size);
+          mesh.element_stiffness.push_back(hex_element_stiffness(size, lambda, mu));
+        }
+        mesh.element_nodes.push_back(nodes);
+        mesh.element_type.push_back(it->second);
+      }
+  mesh.element_count = static_cast<int>(mesh.element_nodes.size());
+  return mesh;
+}
+
+Mat3 hex_element_rotation(const Points& x, const std::array<int, 8>& nodes, const Eigen::Vector3d&) {
+  // Mean edge vectors along the lattice x and y directions (columns of F at the
+  // centre up to the edge length), orthonormalised.
+  const Vec3 ex = (x.col(nodes[1]) - x.col(nodes[0])) + (x.col(nodes[2]) - x.col(nodes[3])) +
+                  (x.col(nodes[5]) - x.col(nodes[4])) + (x.col(nodes[6]) - x.col(nodes[7]));
+  const Vec3 ey = (x.col(nodes[3]) - x.col(nodes[0])) + (x.col(nodes[2]) - x.col(nodes[1])) +
+                  (x.col(nodes[7]) - x.col(nodes[4])) + (x.col(nodes[6]) - x.col(nodes[5]));
+  Mat3 R;
+  R.col(0) = ex.normalized();
+  R.col(2) = R.col(0).cross(ey).normalized();
+  R.col(1) = R.col(2).cross(R.col(0));
+  return R;
+}
+
+void hex_internal_forces(const HexMesh& mesh, const Points& rest, const Points& x, Points& f) {
+  f.setZero();
+  const bool corotational = mesh.formulation == HexFormulation::corotational;
+  for (int e = 0; e < mesh.element_count; ++e) {
+    const auto& nodes = mesh.element_nodes[e];
+    const int type = mesh.element_type[e];
+    Mat3 R;
+    if (corotational) R = hex_element_rotation(x, nodes, mesh.element_size[type]);
+    const ElementVector u = element_displacement(rest, x, nodes, corotational ? &R : nullptr);
+    const ElementVector fe = -(mesh.element_stiffness[type] * u);
+    for (int a = 0; a < 8; ++a)
+      f.col(nodes[a]) += corotational ? Vec3(R * fe.segment<3>(3 * a)) : Vec3(fe.segment<3>(3 * a));
+  }
+}
+
+double hex_strain_energy(const HexMesh& mesh, const Points& rest, const Points& x) {
+  double U = 0;
+  const bool corotational = mesh.formulation == HexFormulation::corotational;
+  for (int e = 0; e < mesh.element_count; ++e) {
+    const auto& nodes = mesh.element_nodes[e];
+    const int type = mesh.element_type[e];
+    Mat3 R;
+    if (corotational) R = hex_element_rotation(x, nodes, mesh.element_size[type]);
+    const ElementVector u = element_displacement(rest, x, nodes, corotational ? &R : nullptr);
+    U += 0.5 * u.dot(mesh.element_stiffness[type] * u);
+  }
+  return U;
+}
+
+void hex_linearize(const HexMesh& mesh, const Points& x, std::vector<double>& cached_rotation) {
+  cached_rotation.resize(9 * static_cast<size_t>(mesh.element_count));
+  for (int e = 0; e < mesh.element_count; ++e) {
+    Eigen::Map<Mat3> R(&cached_rotation[9 * static_cast<size_t>(e)]);
+    R = mesh.formulation == HexFormulation::corotational
+            ? hex_element_rotation(x, mesh.element_nodes[e], mesh.element_size[mesh.element_type[e]])
+            : Mat3::Identity();
+  }
+}
+
+void hex_force_differential(const HexMesh& mesh, const std::vector<double>& cached_rotation, const Points& dx,
+                            Points& df) {
+  df.setZero();
+  const bool corotational = mesh.formulation == HexFormulation::corotational;
+  for (int e = 0; e < mesh.element_count; ++e) {
+    const auto& nodes = mesh.element_nodes[e];
+    const Eigen::Map<const Mat3> R(&cached_rotation[9 * static_cast<size_t>(e)]);
+    ElementVector du;
+    for (int a = 0; a < 8; ++a)
+      du.segment<3>(3 * a) = corotational ? Vec3(R.transpose() * dx.col(nodes[a])) : Vec3(dx.col(nodes[a]));
+    const ElementVector dfe = -(mesh.element_stiffness[mesh.element_type[e]] * du);
+    for (int a = 0; a < 8; ++a)
+      df.col(nodes[a]) += corotational ? Vec3(R * dfe.segment<3>(3 * a)) : Vec3(dfe.segment<3>(3 * a));
+  }
+}
+
+}  // namespace palpate

@@ -1,0 +1,55 @@
+#pragma once
+// Hexahedral finite elements (physics.md §5): 8-node trilinear bricks on the
+// lattice of the scene's box, 2x2x2 Gauss integration, isotropic linear
+// elasticity, in a linear small-strain and a corotational variant (the
+// "large" method of SOFA's HexahedronFEMForceField: the element rotation is
+// taken from its deformed edges, forces f_e = -R_e K_e (R_e^T x_e - X_e)).
+// Lumped masses are the lattice volumes times the density.
+#include <array>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/scene.h"
+#include "core/types.h"
+
+namespace palpate {
+
+using ElementMatrix = Eigen::Matrix<double, 24, 24>;  // dofs: node a, component c -> 3 a + c
+
+// The mesh and everything precomputed from it (part of the Model for "hex_fem").
+struct HexMesh {
+  HexFormulation formulation = HexFormulation::linear;
+  int element_count = 0;
+  // Local node order: (0,0,0) (1,0,0) (1,1,0) (0,1,0) (0,0,1) (1,0,1) (1,1,1) (0,1,1)
+  // in the (x, y, z) lattice directions.
+  std::vector<std::array<int, 8>> element_nodes;  // element_count
+  std::vector<int> element_type;                  // element_count: index into the arrays below
+  std::vector<ElementMatrix> element_stiffness;   // K_e per distinct element size (A regular grid has one.)
+  std::vector<Eigen::Vector3d> element_size;      // edge lengths (hx, hy, hz) per distinct element size
+};
+
+// K_e of an hx x hy x hz brick, 2x2x2 Gauss points, Lame parameters lambda, mu.
+ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu);
+
+// The mesh of a lattice with `per_axis` nodes per axis, node i = a + nx (b + ny c),
+// coordinates taken from `rest_position` (which may be graded along each axis).
+HexMesh hex_mesh(const Points& rest_position, const Eigen::Vector3i& per_axis, double lambda, double mu,
+                 HexFormulation formulation);
+
+// Rotation of an element from its current node positions (columns of F at the
+// centre, Gram-Schmidt on the x and y directions as SOFA's "large" method).
+Mat3 hex_element_rotation(const Points& x, const std::array<int, 8>& nodes, const Eigen::Vector3d& size);
+
+// f (3 x n, overwritten) = internal nodal forces at positions x.
+void hex_internal_forces(const HexMesh& mesh, const Points& rest, const Points& x, Points& f);
+// Strain energy 1/2 u'^T K u' summed over elements (u' the element displacement in
+// its rotated frame; u' = x - X for the linear formulation), J.
+double hex_strain_energy(const HexMesh& mesh, const Points& rest, const Points& x);
+// Tangent stiffness, matrix-free: rotations (9 per element) cached at x, then
+// df = -R K R^T dx per element (exact for linear; SOFA's approximation for corotational).
+void hex_linearize(const HexMesh& mesh, const Points& x, std::vector<double>& cached_rotation);
+void hex_force_differential(const HexMesh& mesh, const std::vector<double>& cached_rotation, const Points& dx,
+                            Points& df);
+
+}  // namespace palpate

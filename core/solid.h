@@ -1,0 +1,20 @@
+#pragma once
+// The elastic solid of a Model, whichever model the scene chose ("mls": the
+// meshless solid of mls_forces.h; "hex_fem": the hexahedral FEM of hex_fem.h).
+// Integrators and tools call these; they dispatch once per call.
+#include "core/model.h"
+#include "core/state.h"
+#include "core/types.h"
+
+namespace palpate {
+
+// f (3 x n, overwritten) = internal elastic forces at positions x.
+void elastic_forces(const Model& model, const Points& x, Points& f);
+// Strain energy at x, J.
+double elastic_energy(const Model& model, const Points& x);
+// Tangent stiffness, matrix-free: cache the linearisation point x in `work`,
+// then df = (df/dx) dx = -K dx.
+void linearize_elastic(const Model& model, const Points& x, Workspace& work);
+void elastic_force_differential(const Model& model, const Workspace& work, const Points& dx, Points& df);
+
+}  // namespace palpate
