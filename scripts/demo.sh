@@ -1,7 +1,16 @@
 #!/usr/bin/env bash
-# Set-up, Release build, then the main job: the Hertz verification sweep of the
-# default scene (the paper's 2 m cube, 18^3 = 5832 particles, RK4 at dt = 1 ms),
-# printing force, simulated and theoretical indentation and the errors.
+# The product's main job for a newcomer: set-up, Release build, then start
+# palpate-server in the background, run palpate-client against it for a few
+# seconds (a force ramp on the default scene, scenes/hertz_cube.json: 18^3
+# particles, RK4 at dt = 1 ms, served at 1 kHz) and stop the server, printing the
+# client's table (time, commanded force, indentation, contact force, the Hertz
+# depth of that force, the difference) and the rate the server held.
+#
+#   scripts/demo.sh                 # the server demo (~10 s after the build)
+#   scripts/demo.sh --headless      # the same client on a headless session (force steps to rest)
+#   scripts/demo.sh --verify [ARGS] # the Hertz verification sweep (palpate-verify, ~40 s)
+#
+# Environment: BUILD_DIR (default build), PORT (default 7420), SECONDS_RUN (default 5), RAMP (default 100 N).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
@@ -9,5 +18,34 @@ BUILD_DIR=${BUILD_DIR:-build}
 echo "== building (Release) in $BUILD_DIR"
 cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$BUILD_DIR" -j"$(nproc)" >/dev/null
-echo "== palpate-verify on scenes/hertz_cube.json"
-exec "$BUILD_DIR/bin/palpate-verify" --scene scenes/hertz_cube.json "$@"
+
+if [[ "${1:-}" == "--verify" ]]; then
+  shift
+  echo "== palpate-verify on scenes/hertz_cube.json"
+  exec "$BUILD_DIR/bin/palpate-verify" --scene scenes/hertz_cube.json "$@"
+fi
+
+PORT=${PORT:-7420}
+SECONDS_RUN=${SECONDS_RUN:-5}
+RAMP=${RAMP:-100}
+LOG=$(mktemp -t palpate-server.XXXXXX.log)
+echo "== palpate-server on 127.0.0.1:$PORT (log: $LOG)"
+"$BUILD_DIR/bin/palpate-server" --listen "127.0.0.1:$PORT" --scene scenes/hertz_cube.json --rate 1000 >"$LOG" 2>&1 &
+SERVER_PID=$!
+trap 'kill -TERM $SERVER_PID 2>/dev/null || true; wait $SERVER_PID 2>/dev/null || true' EXIT
+for _ in $(seq 100); do  # wait for "listening on" (at most 10 s)
+  grep -q "listening on" "$LOG" && break
+  kill -0 $SERVER_PID 2>/dev/null || { cat "$LOG"; exit 1; }
+  sleep 0.1
+done
+grep -q "listening on" "$LOG" || { echo "server did not start"; cat "$LOG"; exit 1; }
+
+if [[ "${1:-}" == "--headless" ]]; then
+  echo "== palpate-client --headless: forces applied one after the other, each stepped to rest"
+  "$BUILD_DIR/bin/palpate-client" --connect "127.0.0.1:$PORT" --scene hertz_cube --headless --forces 10.36,29.30,53.83,82.88
+else
+  echo "== palpate-client: force ramp 0 -> $RAMP N over $SECONDS_RUN s, streamed at 20 Hz"
+  "$BUILD_DIR/bin/palpate-client" --connect "127.0.0.1:$PORT" --scene hertz_cube --ramp "$RAMP" \
+    --seconds "$SECONDS_RUN" --rate 20
+fi
+echo "== (a dynamic ramp lags the quasi-static Hertz depth; scripts/demo.sh --headless compares at rest)"

@@ -1,0 +1,314 @@
+// palpate-bench-server: load benchmark of palpate-server (issue #3).
+//
+//   palpate-bench-server [--json] [--seconds S] [--scene FILE] [--rate HZ] [--viewers N]
+//                        [--connect ADDR:PORT] [--server PATH]
+//
+// Starts palpate-server (next to this executable, on a loopback port the system
+// picks) unless --connect is given, opens one real-time session on the scene
+// (default scenes/hertz_cube.json) at --rate (default 1000 Hz) and attaches:
+//  - one full-rate subscriber (every tick; scalars only: contact force, indenter),
+//    on the connection that sends the commands;
+//  - N (default 4) viewers at 60 Hz with all positions, each on its own connection.
+// Every 50 ms it commands a new force (alternating 20 + k % 10 N) and measures the
+// command-to-stream latency: from sending setForce to receiving the first frame
+// whose commandSeq includes it (the client's clock at both ends). After S seconds
+// (default 30) it reads the session's statistics and prints a table, or with
+// --json one JSON object. The benchmark's own thread asks for SCHED_FIFO 5 (a
+// haptic front-end would run real-time too); "client_fifo" says if it got it.
+#include <fcntl.h>
+#include <limits.h>
+#include <pthread.h>
+#include <sched.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <capnp/ez-rpc.h>
+#include <kj/async-io.h>
+#include <kj/timer.h>
+
+#include "protocol/palpate.capnp.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using palpate::wire::FrameSink;
+using palpate::wire::PalpateServer;
+using palpate::wire::Session;
+
+struct Args {
+  bool json = false;
+  double seconds = 30.0;
+  std::string scene = PALPATE_SOURCE_DIR "/scenes/hertz_cube.json";
+  double rate = 1000.0;
+  int viewers = 4;
+  std::string connect;
+  std::string server;
+};
+
+[[noreturn]] void usage(const std::string& error) {
+  std::fprintf(stderr,
+               "palpate-bench-server: %s\n"
+               "usage: palpate-bench-server [--json] [--seconds S] [--scene FILE] [--rate HZ] [--viewers N]\n"
+               "                            [--connect ADDR:PORT] [--server PATH]\n",
+               error.c_str());
+  std::exit(2);
+}
+
+Args parse_args(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) usage(flag + " needs a value");
+      return argv[++i];
+    };
+    if (flag == "--json") a.json = true;
+    else if (flag == "--seconds") a.seconds = std::atof(value().c_str());
+    else if (flag == "--scene") a.scene = fs::absolute(value()).string();
+    else if (flag == "--rate") a.rate = std::atof(value().c_str());
+    else if (flag == "--viewers") a.viewers = std::atoi(value().c_str());
+    else if (flag == "--connect") a.connect = value();
+    else if (flag == "--server") a.server = value();
+    else usage("unknown option " + flag);
+  }
+  if (!(a.seconds > 0 && a.seconds <= 3600)) usage("--seconds must be in (0, 3600]");
+  if (a.viewers < 0 || a.viewers > 32) usage("--viewers must be in [0, 32]");
+  return a;
+}
+
+// palpate-server as a child process on 127.0.0.1:<system port>.
+struct ServerChild {
+  pid_t pid = -1;
+  std::string address;
+  ServerChild(const std::string& path, const Args& a) {
+    int out[2];
+    if (pipe(out) != 0) std::exit(1);
+    const std::string rate = std::to_string(a.rate);
+    pid = fork();
+    if (pid == 0) {
+      dup2(out[1], STDOUT_FILENO);
+      close(out[0]);
+      close(out[1]);
+      execl(path.c_str(), path.c_str(), "--listen", "127.0.0.1:0", "--scene", a.scene.c_str(), "--rate", rate.c_str(),
+            static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(out[1]);
+    std::string line;
+    const auto deadline = Clock::now() + std::chrono::seconds(20);
+    while (line.find('\n') == std::string::npos && Clock::now() < deadline) {
+      char buf[256];
+      const ssize_t n = read(out[0], buf, sizeof buf);
+      if (n <= 0) break;
+      line.append(buf, static_cast<size_t>(n));
+    }
+    close(out[0]);
+    const auto at = line.find("listening on ");
+    if (at == std::string::npos) {
+      std::fprintf(stderr, "palpate-bench-server: the server did not start (%s)\n", path.c_str());
+      std::exit(1);
+    }
+    address = line.substr(at + 13);
+    while (!address.empty() && (address.back() == '\n' || address.back() == '\r')) address.pop_back();
+  }
+  ~ServerChild() {
+    if (pid > 0) {
+      kill(pid, SIGTERM);
+      waitpid(pid, nullptr, 0);
+    }
+  }
+};
+
+class Recorder final : public FrameSink::Server {
+ public:
+  uint64_t frames = 0;
+  uint64_t last_seq = 0;
+  std::map<uint64_t, Clock::time_point> first_seen;  // command seq -> first frame carrying it
+
+ protected:
+  kj::Promise<void> frame(FrameContext context) override {
+    const auto now = Clock::now();
+    ++frames;
+    const uint64_t seq = context.getParams().getFrame().getCommandSeq();
+    if (seq > last_seq) {
+      for (uint64_t s = last_seq + 1; s <= seq; ++s) first_seen.emplace(s, now);
+      last_seq = seq;
+    }
+    return kj::READY_NOW;
+  }
+  kj::Promise<void> done(DoneContext) override { return kj::READY_NOW; }
+};
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::ceil(q * v.size())) - (q > 0 ? 1 : 0));
+  return v[k];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Args a = parse_args(argc, argv);
+  std::unique_ptr<ServerChild> child;
+  std::string address = a.connect;
+  if (address.empty()) {
+    std::string path = a.server;
+    if (path.empty()) {
+      char self[PATH_MAX] = {};
+      const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+      path = (fs::path(n > 0 ? std::string(self, static_cast<size_t>(n)) : std::string(argv[0])).parent_path() /
+              "palpate-server")
+                 .string();
+    }
+    child = std::make_unique<ServerChild>(path, a);
+    address = child->address;
+  }
+
+  // The client plays a haptic front-end: SCHED_FIFO 5 like the server's RPC
+  // thread when allowed (after the server child was forked), else ordinary.
+  sched_param param{};
+  param.sched_priority = 5;
+  const bool client_fifo = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) == 0;
+
+  try {
+    capnp::ReaderOptions options;
+    options.traversalLimitInWords = 256 * 1024 * 1024;
+    capnp::EzRpcClient control(address, 7420, options);
+    auto& ws = control.getWaitScope();
+    auto& timer = control.getIoProvider().getTimer();
+    auto server = control.getMain<PalpateServer>();
+    auto open = server.openSessionRequest();
+    open.initRequest().setRateHz(a.rate);
+    auto opened = open.send().wait(ws);
+    auto session = opened.getSession();
+    const uint32_t particles = opened.getInfo().getParticleCount();
+    const uint32_t session_id = opened.getInfo().getSessionId();
+
+    // The full-rate subscriber, on the control connection.
+    auto recorder_owner = kj::heap<Recorder>();
+    Recorder& recorder = *recorder_owner;
+    auto sub = session.subscribeRequest();
+    sub.setSink(kj::mv(recorder_owner));
+    sub.getOptions().setRateHz(0);
+    auto full_rate = sub.send().wait(ws).getSubscription();
+
+    // Viewers: their own connections (same event loop, this thread).
+    std::vector<std::unique_ptr<capnp::EzRpcClient>> viewer_connections;
+    std::vector<Recorder*> viewers;
+    std::vector<PalpateServer::Client> viewer_servers;
+    std::vector<Session::Client> viewer_sessions;
+    std::vector<palpate::wire::Subscription::Client> viewer_subs;
+    for (int v = 0; v < a.viewers; ++v) {
+      viewer_connections.push_back(std::make_unique<capnp::EzRpcClient>(address, 7420, options));
+      viewer_servers.push_back(viewer_connections.back()->getMain<PalpateServer>());
+      auto att = viewer_servers.back().attachRequest();
+      att.setSessionId(session_id);
+      viewer_sessions.push_back(att.send().wait(ws).getSession());
+      auto owner = kj::heap<Recorder>();
+      viewers.push_back(owner.get());
+      auto req = viewer_sessions.back().subscribeRequest();
+      req.setSink(kj::mv(owner));
+      req.getOptions().setRateHz(60);
+      req.getOptions().getFields().setPositions(true);
+      viewer_subs.push_back(req.send().wait(ws).getSubscription());
+    }
+
+    // Warm-up, then the measured window: a command every 50 ms.
+    timer.afterDelay(500 * kj::MILLISECONDS).wait(ws);
+    auto stats0_response = session.statsRequest().send().wait(ws);
+    auto stats0 = stats0_response.getStats();
+    const int64_t ticks0 = stats0.getTicks();
+    const double elapsed0 = stats0.getElapsedSeconds();
+    std::map<uint64_t, Clock::time_point> sent;
+    const auto start = Clock::now();
+    for (int k = 0; std::chrono::duration<double>(Clock::now() - start).count() < a.seconds; ++k) {
+      auto req = session.setForceRequest();
+      req.setNewtons(20.0 + k % 10);
+      const auto t = Clock::now();
+      const uint64_t seq = req.send().wait(ws).getSeq();
+      sent.emplace(seq, t);
+      timer.afterDelay(50 * kj::MILLISECONDS).wait(ws);
+    }
+    auto stats_response = session.statsRequest().send().wait(ws);
+    auto stats = stats_response.getStats();
+
+    std::vector<double> latency_ms;
+    for (const auto& [seq, t] : sent)
+      if (auto it = recorder.first_seen.find(seq); it != recorder.first_seen.end())
+        latency_ms.push_back(std::chrono::duration<double, std::milli>(it->second - t).count());
+    const double window_s = stats.getElapsedSeconds() - elapsed0;
+    const double rate = window_s > 0 ? (stats.getTicks() - ticks0) / window_s : 0.0;
+    const double misses = static_cast<double>(stats.getDeadlineMisses());
+    const double miss_ratio = stats.getTicks() > 0 ? misses / static_cast<double>(stats.getTicks()) : 0.0;
+
+    std::vector<uint64_t> dropped, received;
+    uint64_t full_rate_dropped = 0;
+    for (auto s : stats.getSubscribers()) {
+      if (s.getRateHz() == 0) full_rate_dropped = s.getDropped();
+      else dropped.push_back(s.getDropped());
+    }
+    for (Recorder* v : viewers) received.push_back(v->frames);
+    auto list = [](const std::vector<uint64_t>& v) {
+      std::string s = "[";
+      for (size_t k = 0; k < v.size(); ++k) s += (k ? ", " : "") + std::to_string(v[k]);
+      return s + "]";
+    };
+    const auto step = stats.getStepUs();
+    const auto late = stats.getLatenessUs();
+    if (a.json) {
+      std::printf(
+          "{\"scene\": \"%s\", \"particles\": %u, \"seconds\": %.1f, \"target_rate_hz\": %.1f, \"rate_hz\": %.2f, "
+          "\"ticks\": %lld, \"step_p50_us\": %.1f, \"step_p99_us\": %.1f, \"step_max_us\": %.1f, "
+          "\"lateness_p50_us\": %.1f, \"lateness_p99_us\": %.1f, \"lateness_max_us\": %.1f, "
+          "\"deadline_misses\": %llu, \"deadline_miss_ratio\": %.6f, \"skipped_ticks\": %llu, "
+          "\"latency_p50_ms\": %.3f, \"latency_p99_ms\": %.3f, \"latency_max_ms\": %.3f, \"commands\": %zu, "
+          "\"full_rate_frames\": %llu, \"full_rate_dropped\": %llu, \"dropped_frames\": %s, "
+          "\"viewer_frames\": %s, \"blow_ups\": %u, \"realtime_priority\": %s, \"client_fifo\": %s}\n",
+          a.scene.c_str(), particles, a.seconds, stats.getTargetRateHz(), rate,
+          static_cast<long long>(stats.getTicks()), step.getP50(), step.getP99(), step.getMax(), late.getP50(),
+          late.getP99(), late.getMax(), static_cast<unsigned long long>(stats.getDeadlineMisses()), miss_ratio,
+          static_cast<unsigned long long>(stats.getSkippedTicks()), percentile(latency_ms, 0.5),
+          percentile(latency_ms, 0.99), percentile(latency_ms, 1.0), latency_ms.size(),
+          static_cast<unsigned long long>(recorder.frames), static_cast<unsigned long long>(full_rate_dropped),
+          list(dropped).c_str(), list(received).c_str(), stats.getBlowUps(),
+          stats.getRealtimePriority() ? "true" : "false", client_fifo ? "true" : "false");
+    } else {
+      std::printf("scene %s (%u particles), %.0f s at %.0f Hz target, 1 full-rate subscriber + %d viewers at 60 Hz\n",
+                  a.scene.c_str(), particles, a.seconds, stats.getTargetRateHz(), a.viewers);
+      std::printf("achieved rate     %.1f Hz (%lld ticks)%s\n", rate, static_cast<long long>(stats.getTicks()),
+                  stats.getRealtimePriority() ? ", SCHED_FIFO" : "");
+      std::printf("step time         p50 %.0f us, p99 %.0f us, max %.0f us\n", step.getP50(), step.getP99(),
+                  step.getMax());
+      std::printf("tick lateness     p50 %.0f us, p99 %.0f us, max %.0f us\n", late.getP50(), late.getP99(),
+                  late.getMax());
+      std::printf("deadline misses   %llu (%.3f %%), %llu ticks skipped\n",
+                  static_cast<unsigned long long>(stats.getDeadlineMisses()), 100.0 * miss_ratio,
+                  static_cast<unsigned long long>(stats.getSkippedTicks()));
+      std::printf("command->stream   p50 %.2f ms, p99 %.2f ms, max %.2f ms (%zu commands)\n",
+                  percentile(latency_ms, 0.5), percentile(latency_ms, 0.99), percentile(latency_ms, 1.0),
+                  latency_ms.size());
+      std::printf("full-rate frames  %llu received, %llu dropped\n", static_cast<unsigned long long>(recorder.frames),
+                  static_cast<unsigned long long>(full_rate_dropped));
+      std::printf("viewer frames     received %s, dropped %s\n", list(received).c_str(), list(dropped).c_str());
+    }
+  } catch (const kj::Exception& e) {
+    std::fprintf(stderr, "palpate-bench-server: %s\n", e.getDescription().cStr());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,290 @@
+// palpate-bench-step: single-thread timings of the simulation's hot paths on a
+// scene with the indenter pressed into the body (contact active):
+//   one internal_forces call, one RK4 step, one symplectic-Euler step and one
+//   linearly implicit Euler step (step() with the scene's other settings).
+// Every timed call starts from the same pressed state (restored, untimed, before
+// each repetition), so every repetition does the same work; the figures are the
+// medians over the repetitions (std::chrono::steady_clock).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/contact.h"
+#include "core/integrators.h"
+#include "core/mls_forces.h"
+#include "core/model.h"
+#include "core/scene.h"
+#include "core/state.h"
+#include "core/step.h"
+
+namespace {
+
+using namespace palpate;
+using Clock = std::chrono::steady_clock;
+
+const char* kUsage = R"(usage: palpate-bench-step [options]
+Times, single thread, one internal-force evaluation and one step of each
+integrator with the indenter pressed into the body; prints medians.
+  --scene FILE      scene file (default: scenes/hertz_cube.json of the source tree)
+  --per-edge N      override body.distribution.per_edge
+  --set KEY=VALUE   override a scene field by its dotted path (repeatable)
+  --repeats N       repetitions of the force evaluation, RK4 and symplectic-Euler
+                    steps (default 300)
+  --ie-repeats N    repetitions of the implicit-Euler step (default 10)
+  --ie-dt SECONDS   time step of the implicit-Euler step (default 0.01)
+  --press-force N   force pressing the indenter in before timing (default 150)
+  --press-steps N   RK4 steps of pressing in (default 300), then more (up to 20x)
+                    until at least --min-contacts particles are in contact
+  --min-contacts N  (default 4)
+  --json            print one JSON object instead of the table
+)";
+
+// What a timed step starts from.
+struct Snapshot {
+  Points position, velocity;
+  Vec3 indenter_center;
+  double indenter_velocity = 0, force_command = 0, time = 0;
+  int64_t tick = 0;
+};
+
+Snapshot take(const State& s) {
+  return {s.position, s.velocity, s.indenter_center, s.indenter_velocity, s.force_command, s.time, s.tick};
+}
+
+// Restores the start of a step (no allocation: the shapes match).
+void restore(State& s, const Snapshot& snap) {
+  s.position = snap.position;
+  s.velocity = snap.velocity;
+  s.indenter_center = snap.indenter_center;
+  s.indenter_velocity = snap.indenter_velocity;
+  s.force_command = snap.force_command;
+  s.time = snap.time;
+  s.tick = snap.tick;
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t k = v.size() / 2;
+  return v.size() % 2 ? v[k] : 0.5 * (v[k - 1] + v[k]);
+}
+
+int positive_int(const std::string& option, const std::string& text) {
+  size_t used = 0;
+  const int v = std::stoi(text, &used);
+  if (used != text.size() || v <= 0) throw std::invalid_argument(option + ": '" + text + "' is not a positive integer");
+  return v;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::filesystem::path scene_file = std::filesystem::path(PALPATE_SOURCE_DIR) / "scenes" / "hertz_cube.json";
+  SceneOverrides overrides;
+  int repeats = 300, ie_repeats = 10, press_steps = 300, min_contacts = 4;
+  double ie_dt = 0.01, press_force = 150.0;
+  bool json_out = false;
+  try {
+    for (int a = 1; a < argc; ++a) {
+      const std::string arg = argv[a];
+      auto value = [&]() -> std::string {
+        if (a + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
+        return argv[++a];
+      };
+      if (arg == "--scene") scene_file = value();
+      else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
+      else if (arg == "--set") {
+        const std::string kv = value();
+        const auto eq = kv.find('=');
+        if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--set expects KEY=VALUE, got '" + kv + "'");
+        overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+      } else if (arg == "--repeats") repeats = positive_int(arg, value());
+      else if (arg == "--ie-repeats") ie_repeats = positive_int(arg, value());
+      else if (arg == "--press-steps") press_steps = positive_int(arg, value());
+      else if (arg == "--min-contacts") min_contacts = positive_int(arg, value());
+      else if (arg == "--ie-dt") ie_dt = std::stod(value());
+      else if (arg == "--press-force") press_force = std::stod(value());
+      else if (arg == "--json") json_out = true;
+      else if (arg == "--help" || arg == "-h") {
+        std::cout << kUsage;
+        return 0;
+      } else throw std::invalid_argument("unknown option '" + arg + "'");
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-bench-step: " << e.what() << "\n\n" << kUsage;
+    return 2;
+  }
+
+  Model model;
+  try {
+    model = build_model(load_scene(scene_file, overrides));
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-bench-step: " << e.what() << "\n";
+    return 1;
+  }
+  const IntegratorSpec scene_integrator = model.scene.integrator;
+  const int n = model.particle_count;
+  const int nnz = model.neighbor_offset.back();
+
+  // Press the indenter in with RK4 (the scene's dt and damping) until it touches.
+  model.scene.integrator.type = IntegratorType::rk4;
+  State pressed = make_state(model);
+  pressed.force_command = press_force;
+  int pressing = 0;
+  auto too_few = [&] { return static_cast<int>(pressed.contact_index.size()) < min_contacts; };
+  for (; pressing < press_steps || (too_few() && pressing < 20 * press_steps); ++pressing) {
+    const StepStatus st = step(model, pressed);
+    if (st != StepStatus::ok) {
+      std::cerr << "palpate-bench-step: pressing in failed at step " << pressing << ": " << to_string(st) << "\n";
+      return 1;
+    }
+  }
+  const int contacts = static_cast<int>(pressed.contact_index.size());
+  if (contacts < min_contacts) {
+    std::cerr << "palpate-bench-step: " << contacts << " particles in contact after " << pressing
+              << " steps of pressing (want " << min_contacts << ")\n";
+    return 1;
+  }
+  const Snapshot start = take(pressed);
+  bool all_ok = true;
+  auto check = [&](StepStatus st) { all_ok = all_ok && st == StepStatus::ok; };
+
+  // One model and state per integrator (the integrator is read from the model's scene).
+  Model rk4_model = model, se_model = model, ie_model = model;
+  rk4_model.scene.integrator = se_model.scene.integrator = ie_model.scene.integrator = scene_integrator;
+  rk4_model.scene.integrator.type = IntegratorType::rk4;
+  se_model.scene.integrator.type = IntegratorType::symplectic_euler;
+  ie_model.scene.integrator.type = IntegratorType::implicit_euler;
+  ie_model.scene.integrator.dt = ie_dt;
+  State rk4 = make_state(rk4_model), se = make_state(se_model), ie = make_state(ie_model);
+  Points f(3, n);
+
+  // The timed operations, run round-robin (each after its untimed setup) so that
+  // a disturbance of the machine spreads over all of them alike.
+  struct Op {
+    std::function<void()> setup, run;
+    int repeats;
+    std::vector<double> ms;
+  };
+  enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_free, op_count };
+  std::vector<Op> ops(op_count);
+  auto restore_rk4 = [&] { restore(rk4, start); };
+  auto restore_se = [&] { restore(se, start); };
+  auto restore_ie = [&] { restore(ie, start); };
+  // The force evaluation is timed warm (after an untimed one), as in the stages of a step.
+  auto evaluate_forces = [&] { internal_forces(model, start.position, f); };
+  ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
+  // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
+  std::vector<double> cached_F, cached_S;
+  linearize_forces(model, start.position, cached_F, cached_S);
+  Points df(3, n);
+  auto apply_tangent = [&] { force_differential(model, cached_F, cached_S, start.velocity, df); };
+  ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
+  ops[rk4_step] = {restore_rk4, [&] { check(step(rk4_model, rk4)); }, repeats, {}};
+  ops[rk4_free] = {restore_rk4, [&] { free_motion_rk4(rk4_model, rk4); }, repeats, {}};
+  ops[rk4_contact] = {[&] { restore(rk4, start); free_motion_rk4(rk4_model, rk4); },
+                      [&] { check(solve_contact(rk4_model, rk4)); }, repeats, {}};
+  ops[se_step] = {restore_se, [&] { check(step(se_model, se)); }, repeats, {}};
+  ops[se_free] = {restore_se, [&] { free_motion_symplectic_euler(se_model, se); }, repeats, {}};
+  // Linearly implicit Euler with a larger step: CG for the free motion plus one CG
+  // solve per contact candidate for the coupled contact response.
+  ops[ie_step] = {restore_ie, [&] { check(step(ie_model, ie)); }, ie_repeats, {}};
+  ops[ie_free] = {restore_ie, [&] { free_motion_implicit_euler(ie_model, ie); }, ie_repeats, {}};
+  for (Op& op : ops) op.ms.reserve(op.repeats);
+  for (int r = 0; r < std::max(repeats, ie_repeats); ++r)
+    for (Op& op : ops) {
+      if (r >= op.repeats) continue;
+      op.setup();
+      const auto t0 = Clock::now();
+      op.run();
+      const auto t1 = Clock::now();
+      op.ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+    }
+  auto med = [&](int k) { return median(ops[k].ms); };
+  const double flops = internal_forces_flops(model);
+  const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
+               rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
+               ie_ms = med(ie_step), ie_free_ms = med(ie_free);
+
+  // What the last timed steps did (every repetition does the same).
+  restore(rk4, start);
+  check(step(rk4_model, rk4));
+  const int rk4_contacts = static_cast<int>(rk4.contact_index.size());
+  const int rk4_candidates = static_cast<int>(rk4.work.candidate.size());
+  restore(ie, start);
+  check(step(ie_model, ie));
+  const int ie_cg_iterations = ie.cg_iterations;
+  const int ie_candidates = static_cast<int>(ie.work.candidate.size());
+  const int ie_contacts = static_cast<int>(ie.contact_index.size());
+
+  const double gflops = flops / (force_eval_ms * 1e6);
+  nlohmann::json j;
+  j["scene"] = model.scene.name;
+  j["particles"] = n;
+  j["fixed_particles"] = model.fixed_count;
+  j["neighbor_pairs"] = nnz;
+  j["contacts"] = contacts;
+  j["press_steps"] = pressing;
+  j["repeats"] = repeats;
+  j["dt"] = scene_integrator.dt;
+  j["force_eval_ms"] = force_eval_ms;
+  j["force_eval_flops"] = flops;
+  j["force_eval_gflops"] = gflops;
+  j["force_differential_ms"] = tangent_ms;
+  j["rk4_step_ms"] = rk4_ms;
+  j["rk4_step_contacts"] = rk4_contacts;
+  j["rk4_step_breakdown"] = {
+      {"force_evals_ms", 4 * force_eval_ms},
+      {"free_motion_ms", rk4_free_ms},
+      {"vector_updates_ms", rk4_free_ms - 4 * force_eval_ms},
+      {"contact_ms", rk4_contact_ms},
+      {"contact_candidates", rk4_candidates},
+      {"other_ms", rk4_ms - rk4_free_ms - rk4_contact_ms},
+  };
+  j["symplectic_euler_step_ms"] = se_ms;
+  j["symplectic_euler_step_breakdown"] = {
+      {"force_eval_ms", force_eval_ms},
+      {"free_motion_ms", se_free_ms},
+      {"vector_updates_ms", se_free_ms - force_eval_ms},
+      {"contact_and_other_ms", se_ms - se_free_ms},
+  };
+  j["implicit_euler_step_ms"] = ie_ms;
+  j["implicit_euler_dt"] = ie_dt;
+  j["implicit_euler_repeats"] = ie_repeats;
+  j["implicit_euler_cg_iterations"] = ie_cg_iterations;
+  j["implicit_euler_contact_solves"] = ie_candidates;
+  j["implicit_euler_contacts"] = ie_contacts;
+  j["implicit_euler_step_breakdown"] = {
+      {"free_motion_ms", ie_free_ms},
+      {"contact_and_other_ms", ie_ms - ie_free_ms},
+  };
+  j["all_steps_ok"] = all_ok;
+
+  if (json_out) {
+    std::cout << j.dump() << "\n";
+  } else {
+    std::printf("palpate-bench-step: %s, %d particles (%d fixed), %d neighbour pairs (%.2f per particle)\n",
+                model.scene.name.c_str(), n, model.fixed_count, nnz, double(nnz) / n);
+    std::printf("pressed in with %g N for %d RK4 steps: %d particles in contact\n", press_force, pressing, contacts);
+    std::printf("medians of %d repetitions (implicit Euler: %d), single thread\n\n", repeats, ie_repeats);
+    std::printf("  %-34s %10.4f ms   %.2f GFLOP/s (%.3g flop)\n", "internal_forces", force_eval_ms, gflops, flops);
+    std::printf("  %-34s %10.4f ms\n", "force_differential (K dx)", tangent_ms);
+    std::printf("  %-34s %10.4f ms   (%d contacts)\n", "RK4 step", rk4_ms, rk4_contacts);
+    std::printf("  %-34s %10.4f ms\n", "  4 force evaluations", 4 * force_eval_ms);
+    std::printf("  %-34s %10.4f ms\n", "  vector updates (free motion rest)", rk4_free_ms - 4 * force_eval_ms);
+    std::printf("  %-34s %10.4f ms   (%d candidates)\n", "  contact solve", rk4_contact_ms, rk4_candidates);
+    std::printf("  %-34s %10.4f ms\n", "  other", rk4_ms - rk4_free_ms - rk4_contact_ms);
+    std::printf("  %-34s %10.4f ms\n", "symplectic-Euler step", se_ms);
+    std::printf("  %-34s %10.4f ms\n", "  free motion", se_free_ms);
+    std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d contact solves, %d contacts)\n",
+                "implicit-Euler step", ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
+    std::printf("  %-34s %10.4f ms\n", "  free motion", ie_free_ms);
+    if (!all_ok) std::printf("\nwarning: some timed steps did not return ok\n");
+  }
+  return 0;
+}

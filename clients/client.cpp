@@ -1,0 +1,313 @@
+// palpate-client: the demo front-end of palpate-server.
+//
+//   palpate-client --connect 127.0.0.1:PORT [--scene NAME] [--set KEY=VALUE ...]
+//                  [--forces F1,F2,... | --ramp FMAX] [--seconds S] [--rate HZ]
+//                  [--headless [--max-steps N]] [--csv FILE]
+//
+// Real time (default): opens a session, subscribes to the contact force and the
+// indenter at --rate Hz (default 50), ramps the commanded force from 0 to FMAX
+// over S seconds (or holds each listed force S/count seconds) and prints a live
+// table: time, commanded F, indentation d, contact force, the Hertz depth
+// d_H(contact force) (core/hertz.h) and d / d_H - 1. Then the server's statistics.
+// --headless: opens a headless session and, for each force, steps until rest
+// (contact force within 0.1 % of the command, the indenter moving < 1e-6 m per
+// 100 ticks and slower than 1e-5 m/s, for 5 chunks of 100 ticks in a row) or --max-steps, printing one row per force; exits 0.
+// --csv writes every frame received (real time) or every row (headless).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <capnp/ez-rpc.h>
+#include <kj/async-io.h>
+#include <kj/timer.h>
+#include <kj/exception.h>
+
+#include "core/hertz.h"
+#include "protocol/palpate.capnp.h"
+
+namespace {
+
+using palpate::wire::FrameSink;
+using palpate::wire::PalpateServer;
+using palpate::wire::Session;
+
+struct Args {
+  std::string connect = "127.0.0.1:7420";
+  std::string scene;  // empty: the server's default scene
+  std::vector<std::string> overrides;
+  std::vector<double> forces;
+  double ramp = 0.0;  // > 0: ramp to this force
+  double seconds = 5.0;
+  double rate = 50.0;
+  bool headless = false;
+  long max_steps = 20000;
+  std::string csv;
+};
+
+[[noreturn]] void usage(const std::string& error) {
+  std::fprintf(stderr,
+               "palpate-client: %s\n"
+               "usage: palpate-client --connect ADDR:PORT [--scene NAME] [--set KEY=VALUE ...]\n"
+               "                      [--forces F1,F2,... | --ramp FMAX] [--seconds S] [--rate HZ]\n"
+               "                      [--headless [--max-steps N]] [--csv FILE]\n",
+               error.c_str());
+  std::exit(2);
+}
+
+double number(const std::string& flag, const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0' || !std::isfinite(v)) usage(flag + " expects a number, got '" + text + "'");
+  return v;
+}
+
+Args parse_args(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) usage(flag + " needs a value");
+      return argv[++i];
+    };
+    if (flag == "--connect") a.connect = value();
+    else if (flag == "--scene") a.scene = value();
+    else if (flag == "--set") a.overrides.push_back(value());
+    else if (flag == "--forces") {
+      std::stringstream ss(value());
+      for (std::string item; std::getline(ss, item, ',');) a.forces.push_back(number(flag, item));
+      if (a.forces.empty()) usage("--forces needs at least one force");
+    } else if (flag == "--ramp") a.ramp = number(flag, value());
+    else if (flag == "--seconds") a.seconds = number(flag, value());
+    else if (flag == "--rate") a.rate = number(flag, value());
+    else if (flag == "--headless") a.headless = true;
+    else if (flag == "--max-steps") a.max_steps = static_cast<long>(number(flag, value()));
+    else if (flag == "--csv") a.csv = value();
+    else if (flag == "--help" || flag == "-h") usage("help");
+    else usage("unknown option " + flag);
+  }
+  if (!(a.seconds > 0 && a.seconds <= 86400)) usage("--seconds must be in (0, 86400]");
+  if (!(a.rate > 0 && a.rate <= 10000)) usage("--rate must be in (0, 10000]");
+  if (a.max_steps < 1) usage("--max-steps must be >= 1");
+  return a;
+}
+
+struct Row {
+  double time = 0, command = 0, indentation = 0, contact = 0;
+  int64_t tick = 0;
+};
+
+struct Hertz {
+  double radius = 0.5, e_star = 1.0;
+  double depth(double f) const { return f > 0 ? palpate::hertz::depth(f, radius, e_star) : 0.0; }
+};
+
+void print_header() {
+  std::printf("%9s %9s %10s %11s %11s %11s %9s\n", "time[s]", "tick", "F_cmd[N]", "d[m]", "F_contact[N]", "d_Hertz[m]",
+              "d/d_H-1");
+}
+
+void print_row(const Row& r, const Hertz& h) {
+  const double dh = h.depth(r.contact);
+  char diff[32] = "-";
+  if (dh > 1e-9) std::snprintf(diff, sizeof diff, "%+.1f%%", 100.0 * (r.indentation / dh - 1.0));
+  std::printf("%9.3f %9lld %10.3f %11.5f %11.3f %11.5f %9s\n", r.time, static_cast<long long>(r.tick), r.command,
+              r.indentation, r.contact, dh, diff);
+  std::fflush(stdout);
+}
+
+// Records the frames the server streams.
+class Sink final : public FrameSink::Server {
+ public:
+  explicit Sink(std::chrono::steady_clock::time_point start) : start_(start) {}
+  std::vector<Row> rows;
+  Row latest;
+  bool have = false;
+  bool finished = false;
+
+ protected:
+  kj::Promise<void> frame(FrameContext context) override {
+    auto f = context.getParams().getFrame();
+    Row r;
+    r.time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    r.tick = f.getTick();
+    r.command = f.getForceCommand();
+    r.indentation = f.getIndentation();
+    r.contact = f.getIndenterContactForce();
+    latest = r;
+    have = true;
+    if (rows.size() < 10000000) rows.push_back(r);
+    return kj::READY_NOW;
+  }
+  kj::Promise<void> done(DoneContext) override {
+    finished = true;
+    return kj::READY_NOW;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point start_;
+};
+
+void fill_open(PalpateServer::OpenSessionParams::Builder params, const Args& a, bool headless) {
+  auto req = params.initRequest();
+  if (!a.scene.empty()) req.getScene().setName(a.scene);
+  auto o = req.initOverrides(static_cast<unsigned>(a.overrides.size()));
+  for (unsigned k = 0; k < a.overrides.size(); ++k) o.set(k, a.overrides[k]);
+  req.setHeadless(headless);
+}
+
+void write_csv(const std::string& path, const std::vector<Row>& rows, const Hertz& h) {
+  std::ofstream out(path);
+  if (!out) {
+    std::fprintf(stderr, "palpate-client: cannot write %s\n", path.c_str());
+    return;
+  }
+  out << "time_s,tick,force_command_n,indentation_m,contact_force_n,hertz_depth_m\n";
+  out.precision(9);
+  for (const Row& r : rows)
+    out << r.time << ',' << r.tick << ',' << r.command << ',' << r.indentation << ',' << r.contact << ','
+        << h.depth(r.contact) << '\n';
+}
+
+int run_realtime(const Args& a, Session::Client session, const Hertz& h, kj::WaitScope& ws, kj::Timer& timer) {
+  const auto start = std::chrono::steady_clock::now();
+  auto sink_owner = kj::heap<Sink>(start);
+  Sink& sink = *sink_owner;
+  auto sub = session.subscribeRequest();
+  sub.setSink(kj::mv(sink_owner));
+  sub.getOptions().setRateHz(a.rate);
+  auto subscription = sub.send().wait(ws).getSubscription();
+
+  auto command_at = [&](double t) {
+    if (!a.forces.empty()) {
+      const size_t k = std::min(a.forces.size() - 1, static_cast<size_t>(t / a.seconds * a.forces.size()));
+      return a.forces[k];
+    }
+    return a.ramp * std::min(1.0, t / a.seconds);
+  };
+  print_header();
+  double last_print = -1.0, last_command = NAN;
+  for (;;) {
+    const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (t >= a.seconds) break;
+    const double f = command_at(t);
+    if (f != last_command) {
+      auto req = session.setForceRequest();
+      req.setNewtons(f);
+      req.send().wait(ws);
+      last_command = f;
+    }
+    if (sink.have && t - last_print >= 0.25) {
+      print_row(sink.latest, h);
+      last_print = t;
+    }
+    timer.afterDelay(20 * kj::MILLISECONDS).wait(ws);
+  }
+  if (sink.have) print_row(sink.latest, h);
+
+  auto stats_response = session.statsRequest().send().wait(ws);
+
+  auto stats = stats_response.getStats();
+  std::printf("\nserver: %.1f Hz achieved (target %.0f Hz), %lld ticks; step p50 %.0f us, p99 %.0f us, max %.0f us\n",
+              stats.getAchievedRateHz(), stats.getTargetRateHz(), static_cast<long long>(stats.getTicks()),
+              stats.getStepUs().getP50(), stats.getStepUs().getP99(), stats.getStepUs().getMax());
+  std::printf("        tick lateness p50 %.0f us, p99 %.0f us, max %.0f us; deadline misses %llu (%.2f %%), "
+              "blow-ups %u%s\n",
+              stats.getLatenessUs().getP50(), stats.getLatenessUs().getP99(), stats.getLatenessUs().getMax(),
+              static_cast<unsigned long long>(stats.getDeadlineMisses()),
+              stats.getTicks() > 0 ? 100.0 * stats.getDeadlineMisses() / stats.getTicks() : 0.0, stats.getBlowUps(),
+              stats.getRealtimePriority() ? ", SCHED_FIFO" : "");
+  for (auto s : stats.getSubscribers())
+    std::printf("        subscriber %u at %.0f Hz: %llu frames sent, %llu dropped\n", s.getId(), s.getRateHz(),
+                static_cast<unsigned long long>(s.getSent()), static_cast<unsigned long long>(s.getDropped()));
+  std::printf("client: %zu frames received in %.1f s\n", sink.rows.size(), a.seconds);
+  if (!a.csv.empty()) write_csv(a.csv, sink.rows, h);
+  return 0;
+}
+
+int run_headless(const Args& a, Session::Client session, const Hertz& h, double dt, kj::WaitScope& ws) {
+  std::vector<double> forces = a.forces;
+  if (forces.empty()) {
+    const double top = a.ramp > 0 ? a.ramp : 80.0;
+    for (int k = 1; k <= 4; ++k) forces.push_back(top * k / 4.0);
+  }
+  print_header();
+  std::vector<Row> rows;
+  const auto start = std::chrono::steady_clock::now();
+  for (double f : forces) {
+    auto req = session.setForceRequest();
+    req.setNewtons(f);
+    req.send().wait(ws);
+    Row r;
+    double previous_d = NAN;
+    long steps = 0;
+    int quiet = 0;
+    constexpr unsigned kChunk = 100;
+    while (steps < a.max_steps) {
+      auto step = session.stepRequest();
+      step.setN(kChunk);
+      auto frame_response = step.send().wait(ws);
+      auto frame = frame_response.getFrame();
+      steps += kChunk;
+      r.tick = frame.getTick();
+      r.time = frame.getSimTime();
+      r.command = frame.getForceCommand();
+      r.indentation = frame.getIndentation();
+      r.contact = frame.getIndenterContactForce();
+      const bool balanced = std::abs(r.contact - f) <= 1e-3 * std::max(std::abs(f), 1e-9);
+      const bool still = std::abs(r.indentation - previous_d) <= 1e-6 && std::abs(frame.getIndenterVelocity()) <= 1e-5;
+      previous_d = r.indentation;
+      quiet = balanced && still ? quiet + 1 : 0;
+      if (quiet >= 5) break;  // 0.5 s at dt = 1 ms: not just a turning point of an oscillation
+    }
+    print_row(r, h);
+    rows.push_back(r);
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  auto stats_response = session.statsRequest().send().wait(ws);
+  auto stats = stats_response.getStats();
+  std::printf("\nheadless: %lld ticks (%.1f s simulated at dt %.3g s) in %.2f s wall, %.0f ticks/s; step p50 %.0f us, "
+              "p99 %.0f us; blow-ups %u\n",
+              static_cast<long long>(stats.getTicks()), stats.getTicks() * dt, dt, wall, stats.getAchievedRateHz(),
+              stats.getStepUs().getP50(), stats.getStepUs().getP99(), stats.getBlowUps());
+  if (!a.csv.empty()) write_csv(a.csv, rows, h);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Args a = parse_args(argc, argv);
+  try {
+    capnp::ReaderOptions options;
+    options.traversalLimitInWords = 256 * 1024 * 1024;
+    capnp::EzRpcClient client(a.connect, 7420, options);
+    auto& ws = client.getWaitScope();
+    auto server = client.getMain<PalpateServer>();
+    auto version = server.versionRequest().send().wait(ws);
+    if (version.getProtocolVersion() != palpate::wire::PROTOCOL_VERSION)
+      std::fprintf(stderr, "palpate-client: warning: server speaks protocol %u, this client %u\n",
+                   version.getProtocolVersion(), palpate::wire::PROTOCOL_VERSION);
+    auto open = server.openSessionRequest();
+    fill_open(open, a, a.headless);
+    auto opened = open.send().wait(ws);
+    auto info = opened.getInfo();
+    Hertz h;
+    h.radius = info.getRadius();
+    h.e_star = palpate::hertz::effective_modulus(info.getYoungModulus(), info.getPoissonRatio());
+    std::printf("scene %s: %u particles, dt %.3g s, %s (%.0f Hz), force limit %.0f N, model built in %.2f s\n",
+                info.getSceneName().cStr(), info.getParticleCount(), info.getDt(),
+                info.getHeadless() ? "headless" : "real time", info.getRateHz(), info.getForceLimit(),
+                info.getBuildSeconds());
+    if (a.headless) return run_headless(a, opened.getSession(), h, info.getDt(), ws);
+    return run_realtime(a, opened.getSession(), h, ws, client.getIoProvider().getTimer());
+  } catch (const kj::Exception& e) {
+    std::fprintf(stderr, "palpate-client: %s\n", e.getDescription().cStr());
+    return 1;
+  }
+}

@@ -1,0 +1,310 @@
+# palpate wire protocol: a meshless soft-tissue simulation pressed by a rigid
+# sphere, served in real time (fixed-rate loop) or headless (stepped on demand).
+#
+# Conventions: SI units (m, kg, s, N, Pa). The indenter moves along z only; a
+# positive force presses it down (-z). A "tick" is one simulation step of the
+# scene's dt. Errors (bad scene, refused command) come back as RPC exceptions
+# whose description names the field and the reason, e.g.
+#   "<rpc scene>: /material/poisson_ratio: must be a number in (-1, 0.5), got 0.7".
+#
+# Versioning: `protocolVersion` below, returned by PalpateServer.version(). It changes
+# whenever a change is not backwards compatible (renumbered or retyped fields);
+# additions with new ordinals keep it.
+@0x84615ea29ce2782e;
+
+using Cxx = import "/capnp/c++.capnp";
+$Cxx.namespace("palpate::wire");
+using Json = import "/capnp/compat/json.capnp";
+
+const protocolVersion :UInt32 = 1;
+
+# ---------------------------------------------------------------------------
+# Scene: the same content as a JSON scene file (docs/scene-format.md), with the
+# file's snake_case names as $Json.name. The server turns it into JSON (only the
+# fields that differ from the defaults below, and the lists that are set) and
+# validates it with the file validator, so a wire scene and a file behave the
+# same and errors name the JSON pointer of the field. Every default below equals
+# the file format's default; a null list means "absent" (the file default).
+
+enum DistributionType {
+  grid @0;
+  jitteredGrid @1 $Json.name("jittered_grid");
+  nodeFile @2 $Json.name("node_file");
+}
+enum VolumeRule {
+  kernel @0;   # (A-2, A-3) kernel sums
+  lattice @1;  # lattice cell volumes
+}
+enum IntegratorType {
+  rk4 @0;
+  symplecticEuler @1 $Json.name("symplectic_euler");
+  implicitEuler @2 $Json.name("implicit_euler");
+}
+enum HexFormulation {
+  linear @0;
+  corotational @1;
+}
+enum Face {
+  bottom @0;                     # z = min.z
+  top @1;                        # z = max.z
+  xMin @2 $Json.name("x_min");
+  xMax @3 $Json.name("x_max");
+  yMin @4 $Json.name("y_min");
+  yMax @5 $Json.name("y_max");
+  sides @6;                      # x_min, x_max, y_min, y_max
+}
+
+struct Box {
+  min @0 :List(Float64);  # [x, y, z], m; null = [-1, -1, -2]
+  max @1 :List(Float64);  # [x, y, z], m; null = [1, 1, 0]
+}
+struct Distribution {
+  type @0 :DistributionType = grid;
+  perEdge @1 :Int32 = 18 $Json.name("per_edge");       # [2, 200], used when spacing == 0
+  spacing @2 :Float64 = 0;                             # m, > 0 chooses the lattice by spacing
+  jitter @3 :Float64 = 0.3;                            # [0, 0.5), fraction of the spacing
+  seed @4 :UInt32 = 1;                                 # jittered_grid (the wire carries 32 bits)
+  nodeFile @5 :Text $Json.name("node_file");           # path on the server, relative to --scene-dir
+}
+struct Body {
+  box @0 :Box;
+  distribution @1 :Distribution;
+}
+struct Mls {
+  neighbors @0 :Int32 = 16;                                   # k, [4, 64]
+  supportFactor @1 :Float64 = 1.0 $Json.name("support_factor"); # alpha, (0, 10]
+  volumes @2 :VolumeRule = kernel;
+  hourglass @3 :Float64 = 0;                                  # [0, 100], 0 = off
+  regularization @4 :Float64 = 1e-6;                          # [0, 1)
+}
+struct HexFem {
+  formulation @0 :HexFormulation = linear;
+}
+struct Material {
+  youngModulus @0 :Float64 = 1e4 $Json.name("young_modulus");       # Pa, (0, 1e12]
+  poissonRatio @1 :Float64 = 0.3 $Json.name("poisson_ratio");       # (-1, 0.5)
+  density @2 :Float64 = 1000;                                        # kg/m^3, (0, 1e5]
+  volumeStiffness @3 :Float64 = 0 $Json.name("volume_stiffness");   # Pa, [0, 1e12]
+}
+struct Indenter {
+  radius @0 :Float64 = 0.5;        # m, (0, 1000]
+  mass @1 :Float64 = 1.0;          # kg, (0, 1e6]
+  position @2 :List(Float64);      # [x, y, z] m; null = centred over the top face, just touching
+  force @3 :Float64 = 0;           # N, initial command, pressing down when positive
+}
+struct Contact {
+  tolerance @0 :Float64 = 1e-6;                              # m, (0, 1]
+  maxIterations @1 :Int32 = 200 $Json.name("max_iterations"); # [1, 1e6]
+}
+struct Integrator {
+  type @0 :IntegratorType = rk4;
+  dt @1 :Float64 = 0.001;                                         # s, (0, 1]
+  damping @2 :Float64 = 0;                                        # 1/s, [0, 1e6]
+  cgTolerance @3 :Float64 = 1e-8 $Json.name("cg_tolerance");      # (0, 1)
+  cgMaxIterations @4 :Int32 = 1000 $Json.name("cg_max_iterations"); # [1, 1e6]
+}
+struct Rest {
+  velocityTolerance @0 :Float64 = 1e-4 $Json.name("velocity_tolerance"); # m/s, > 0
+  forceTolerance @1 :Float64 = 1e-3 $Json.name("force_tolerance");       # relative, > 0
+  window @2 :Float64 = 0.05;                                             # s, > 0
+  maxTime @3 :Float64 = 60 $Json.name("max_time");                        # s, (0, 1e6]
+}
+struct Verify {
+  forces @0 :List(Float64);  # N, each in (0, 1e9]; null or empty = Hertz loads for d = 0.01 ... 0.1 m
+  rest @1 :Rest;
+}
+struct Scene {
+  name @0 :Text;                     # null = "<rpc scene>"
+  model @1 :Text;                    # "mls" (null) or "hex_fem"
+  body @2 :Body;
+  mls @3 :Mls;
+  hexFem @4 :HexFem $Json.name("hex_fem");
+  material @5 :Material;
+  fixed @6 :List(Face);              # null = [bottom, sides]; empty = a free body
+  indenter @7 :Indenter;
+  contact @8 :Contact;
+  integrator @9 :Integrator;
+  gravity @10 :List(Float64);        # [x, y, z] m/s^2; null = [0, 0, 0]; norm <= 1000
+  verify @11 :Verify;
+}
+
+# ---------------------------------------------------------------------------
+# Opening a session.
+
+struct OpenRequest {
+  scene :union {
+    serverDefault @0 :Void;  # the server's --scene file
+    name @1 :Text;           # a file <name>.json under the server's --scene-dir (plain name, no path)
+    inlineScene @2 :Scene;   # a scene sent by the client
+  }
+  overrides @3 :List(Text);  # "dotted.key=value", applied before validation (like --set)
+  headless @4 :Bool;         # true: not paced, advanced only by Session.step()
+  rateHz @5 :Float64;        # real-time loop rate; 0 = the server's --rate. (0, 10000]
+}
+
+struct SessionInfo {
+  sceneName @0 :Text;
+  particleCount @1 :UInt32;
+  dt @2 :Float64;              # s per tick
+  rateHz @3 :Float64;          # target tick rate (0 for headless)
+  headless @4 :Bool;
+  forceLimit @5 :Float64;      # N; setForce refuses |F| above it (see Session.setForce)
+  restPositions @6 :List(Float32);  # 3 n, x y z per particle, m (the reference configuration)
+  touchHeight @7 :Float64;     # z of the indenter centre when it first touches the undeformed body, m
+  radius @8 :Float64;          # indenter radius, m
+  youngModulus @9 :Float64;    # Pa (for the Hertz prediction on the client)
+  poissonRatio @10 :Float64;
+  buildSeconds @11 :Float64;   # time spent building the model
+  sessionId @12 :UInt32;       # for PalpateServer.attach() from another connection
+}
+
+# ---------------------------------------------------------------------------
+# Streaming.
+
+struct Vec3 {
+  x @0 :Float64;
+  y @1 :Float64;
+  z @2 :Float64;
+}
+
+# Which optional fields a subscription (or step()) fills. The scalar fields of
+# Frame (tick, times, indenter, contact force, command) are always present.
+struct FrameFields {
+  positions @0 :Bool;   # Frame.positions (3 n Float32, ~70 KB for 18^3)
+  contacts @1 :Bool;    # Frame.contactNodes / contactForces
+}
+
+struct Frame {
+  tick @0 :Int64;                   # ticks since the session (re)started; resets with reset()
+  simTime @1 :Float64;              # s
+  publishNs @2 :Int64;              # server CLOCK_MONOTONIC when the tick finished, ns
+  indenterPosition @3 :Vec3;        # m
+  indenterVelocity @4 :Float64;     # m/s along z
+  indenterContactForce @5 :Float64; # N, z force of the body on the indenter (positive up)
+  indentation @6 :Float64;          # m, travel below first touch (positive when pressing)
+  forceCommand @7 :Float64;         # N, the command in effect during this tick
+  commandSeq @8 :UInt64;            # sequence number of the last command applied (0 = none)
+  recoveries @9 :UInt32;            # blow-ups recovered so far in this session
+  positions @10 :List(Float32);     # 3 n: x y z per particle, m (when FrameFields.positions)
+  contactNodes @11 :List(UInt32);   # particles in contact (when FrameFields.contacts)
+  contactForces @12 :List(Float32); # 3 per contact: force on that particle, N
+}
+
+interface FrameSink {
+  frame @0 (frame :Frame) -> stream;
+  # One frame. The server sends the next only after this one's flow-control
+  # go-ahead; frames in between are dropped (newest wins) and counted.
+  done @1 (reason :Text);
+  # The session ended (closed, server shutting down). No more frames follow.
+}
+
+struct SubscribeOptions {
+  rateHz @0 :Float64;     # maximum frames per second; 0 = every tick
+  fields @1 :FrameFields;
+}
+
+interface Subscription {}
+# Handle of a subscription: releasing it unsubscribes.
+
+# ---------------------------------------------------------------------------
+# Statistics.
+
+struct Percentiles {
+  p50 @0 :Float64;
+  p99 @1 :Float64;
+  max @2 :Float64;
+}
+
+struct SubscriberStats {
+  id @0 :UInt32;
+  rateHz @1 :Float64;     # requested (0 = every tick)
+  sent @2 :UInt64;        # frames sent
+  dropped @3 :UInt64;     # frames due by rate but skipped because the previous one was in flight
+  inFlight @4 :Bool;
+}
+
+struct Stats {
+  ticks @0 :Int64;                # ticks stepped since the session started (all resets included)
+  elapsedSeconds @1 :Float64;     # wall time since the loop started
+  targetRateHz @2 :Float64;
+  achievedRateHz @3 :Float64;     # ticks / elapsed wall time (headless: ticks per second of stepping)
+  stepUs @4 :Percentiles;         # time of one core step, us
+  latenessUs @5 :Percentiles;     # tick start minus its absolute deadline, us (real-time only)
+  deadlineMisses @6 :UInt64;      # ticks whose work ended after the next tick's deadline
+  skippedTicks @7 :UInt64;        # deadlines abandoned when the loop fell more than a period behind
+  blowUps @8 :UInt32;             # non-finite states detected and recovered
+  framesPublished @9 :UInt64;
+  framesCoalesced @10 :UInt64;    # published frames the RPC thread never saw (a newer one replaced them)
+  subscribers @11 :List(SubscriberStats);
+  realtimePriority @12 :Bool;     # SCHED_FIFO granted to the loop thread
+  spinMarginUs @13 :Float64;      # the loop sleeps until this long before a deadline, then spins
+}
+
+enum RunState {
+  starting @0;   # the model is being built
+  running @1;    # real-time loop ticking
+  paused @2;     # real-time loop alive, not stepping
+  headless @3;   # advanced only by step()
+  failed @4;     # the model could not be built (see message)
+}
+
+struct Status {
+  state @0 :RunState;
+  tick @1 :Int64;
+  simTime @2 :Float64;
+  forceCommand @3 :Float64;
+  blowUps @4 :UInt32;
+  lastBlowUp @5 :Text;         # what was detected and how it recovered; empty if none
+  lastBlowUpTick @6 :Int64;    # -1 if none
+}
+
+# ---------------------------------------------------------------------------
+# Interfaces.
+
+interface Session {
+  setForce @0 (newtons :Float64) -> (seq :UInt64, queuedAtTick :Int64);
+  # Commands the indenter force (N, pressing down when positive), applied at the
+  # start of the next tick. Refused, leaving the state untouched, when NaN,
+  # infinite or |F| > SessionInfo.forceLimit (100 x the scene's largest
+  # verification force, or 100 x the Hertz force at 0.1 m depth when the scene
+  # has no sweep). seq appears in Frame.commandSeq once applied; queuedAtTick is
+  # the newest published tick when the command was queued.
+
+  reset @1 () -> (seq :UInt64);
+  # Back to the rest state of the scene (tick 0, the scene's initial force).
+
+  pause @2 () -> (seq :UInt64);
+  resume @3 () -> (seq :UInt64);
+  # Real-time sessions: stop / restart stepping (the loop keeps its deadlines).
+
+  subscribe @4 (sink :FrameSink, options :SubscribeOptions) -> (subscription :Subscription);
+  # Streams frames to sink until the returned handle is released or the
+  # connection drops. Headless sessions stream the frames step() produces.
+
+  step @5 (n :UInt32, fields :FrameFields) -> (frame :Frame);
+  # Headless sessions only: advances exactly n ticks (n <= 10^6) and returns the
+  # last frame. Deterministic: the same scene and calls give bit-identical frames.
+
+  stats @6 () -> (stats :Stats);
+  status @7 () -> (status :Status);
+  info @8 () -> (info :SessionInfo);
+}
+
+interface PalpateServer {
+  # The bootstrap interface (named PalpateServer: a capnp interface called Server
+  # would clash with the generated C++ Server class).
+  version @0 () -> (protocolVersion :UInt32, server :Text);
+  # protocolVersion = the constant above as compiled into the server.
+
+  openSession @1 (request :OpenRequest) -> (session :Session, info :SessionInfo);
+  # Builds the scene's model (off the RPC thread) and starts the session.
+  # Releasing the session capability stops it.
+
+  listScenes @2 () -> (names :List(Text));
+  # Scene names available under --scene-dir.
+
+  attach @3 (sessionId :UInt32) -> (session :Session, info :SessionInfo);
+  # Another reference to a live session (e.g. a viewer on its own connection, so
+  # that its bytes never share a socket with a haptic client's frames). The
+  # session lives while any reference does.
+}

@@ -1,0 +1,532 @@
+// Sessions, subscriptions and streaming (the RPC thread).
+//
+// Streaming policy (capnp.md §2): per subscriber {inFlight, nextDue, interval}.
+// When the simulation publishes (eventfd wake-up), the newest frame goes to every
+// subscriber that is due and has nothing in flight; a due subscriber that still
+// has a frame in flight skips this one (drop-newest) and it is counted. Nothing
+// queues: the triple buffer holds only the newest frame, so a slow viewer costs
+// the loop and the other subscribers nothing.
+#include "server/session.h"
+
+#include <algorithm>
+#include <cmath>
+#include <system_error>
+
+#include <capnp/message.h>
+#include <spdlog/spdlog.h>
+
+#include "core/hertz.h"
+#include "protocol/scene_wire.h"
+
+namespace palpate::server {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// An RPC error whose description goes back to the caller as is.
+[[noreturn]] void fail(const std::string& message) {
+  throw kj::Exception(kj::Exception::Type::FAILED, __FILE__, __LINE__, kj::heapString(message.c_str()));
+}
+
+void fill_frame(wire::Frame::Builder f, const Snapshot& s, bool positions, bool contacts) {
+  f.setTick(s.tick);
+  f.setSimTime(s.sim_time);
+  f.setPublishNs(s.publish_ns);
+  auto p = f.initIndenterPosition();
+  p.setX(s.indenter[0]);
+  p.setY(s.indenter[1]);
+  p.setZ(s.indenter[2]);
+  f.setIndenterVelocity(s.indenter_velocity);
+  f.setIndenterContactForce(s.contact_force);
+  f.setIndentation(s.indentation);
+  f.setForceCommand(s.force_command);
+  f.setCommandSeq(s.command_seq);
+  f.setRecoveries(s.recoveries);
+  if (positions && s.has_positions) {
+    auto list = f.initPositions(static_cast<unsigned>(s.positions.size()));
+    for (unsigned k = 0; k < s.positions.size(); ++k) list.set(k, s.positions[k]);
+  }
+  if (contacts && s.has_contacts) {
+    auto nodes = f.initContactNodes(static_cast<unsigned>(s.contact_nodes.size()));
+    for (unsigned k = 0; k < s.contact_nodes.size(); ++k) nodes.set(k, s.contact_nodes[k]);
+    auto forces = f.initContactForces(static_cast<unsigned>(s.contact_forces.size()));
+    for (unsigned k = 0; k < s.contact_forces.size(); ++k) forces.set(k, s.contact_forces[k]);
+  }
+}
+
+capnp::MessageSize frame_size_hint(const Snapshot& s, bool positions, bool contacts) {
+  uint64_t words = 64;
+  if (positions && s.has_positions) words += s.positions.size() / 2 + 2;
+  if (contacts && s.has_contacts) words += s.contact_nodes.size() + 4;
+  return {words, 0};
+}
+
+void fill_percentiles(wire::Percentiles::Builder b, const Histogram::Summary& s) {
+  b.setP50(s.p50);
+  b.setP99(s.p99);
+  b.setMax(s.max);
+}
+
+bool plain_scene_name(const std::string& name) {
+  if (name.empty() || name.size() > 200 || name[0] == '.') return false;
+  for (char c : name)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) return false;
+  return true;
+}
+
+std::vector<std::string> scene_names(const fs::path& dir) {
+  std::vector<std::string> names;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().extension() == ".json") names.push_back(it->path().stem().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// The largest |F| setForce accepts: 100 x the largest verification force, or
+// 100 x the Hertz force at 0.1 m depth when the scene has no sweep.
+double force_limit(const Scene& scene) {
+  double f = 0.0;
+  for (double v : scene.verify.forces) f = std::max(f, std::abs(v));
+  if (f == 0.0)
+    f = hertz::force(0.1, scene.indenter.radius,
+                     hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio));
+  return 100.0 * f;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// ServerContext
+
+ServerContext::ServerContext(kj::AsyncIoContext& io_, ServerOptions options_)
+    : io(io_), options(std::move(options_)) {}
+
+void ServerContext::ErrorHandler::taskFailed(kj::Exception&& e) {
+  spdlog::debug("task ended: {}", e.getDescription().cStr());
+}
+
+// ---------------------------------------------------------------------------
+// SessionImpl
+
+class SessionImpl final : public wire::Session::Server {
+ public:
+  SessionImpl(ServerContext& ctx, SimConfig config)
+      : ctx_(ctx), id_(ctx.next_session_id++), sim_(std::make_unique<Simulation>(std::move(config))) {
+    ctx_.sessions[id_] = this;
+    wake_ = ctx_.io.lowLevelProvider->wrapInputFd(
+        sim_->wake_fd(), kj::LowLevelAsyncIoProvider::ALREADY_CLOEXEC | kj::LowLevelAsyncIoProvider::ALREADY_NONBLOCK);
+    wake_loop_ = watch().eagerlyEvaluate([this](kj::Exception&& e) {
+      spdlog::error("session {}: wake-up watch failed: {}", id_, e.getDescription().cStr());
+    });
+    spdlog::info("session {} opened ({}, {})", id_, sim_->config().scene.name,
+                 sim_->config().headless ? "headless" : "real-time");
+  }
+
+  ~SessionImpl() noexcept(false) {
+    ctx_.sessions.erase(id_);
+    sim_->stop();  // no more wake-ups
+    for (auto& sub : subscribers_) {
+      auto req = sub.sink.doneRequest();
+      req.setReason("session closed");
+      ctx_.add_task(req.send().ignoreResult());
+    }
+    subscribers_.clear();
+    wake_loop_ = nullptr;
+    wake_ = nullptr;
+    const auto c = sim_->counters();
+    spdlog::info("session {} closed after {} ticks ({} blow-ups)", id_, c.ticks, c.blow_ups);
+  }
+
+  // Resolves once the model is built; rejects with the build error.
+  kj::Promise<void> when_ready() {
+    check_phase();
+    if (phase_ == Phase::ready) return kj::READY_NOW;
+    if (phase_ == Phase::failed) fail(error_);
+    auto paf = kj::newPromiseAndFulfiller<void>();
+    ready_waiters_.add(kj::mv(paf.fulfiller));
+    return kj::mv(paf.promise);
+  }
+
+  void stop() { sim_->stop(); }
+  wire::Session::Client self() { return thisCap(); }
+
+  void fill_info(wire::SessionInfo::Builder info) {
+    const Model& m = sim_->model();
+    const Scene& s = m.scene;
+    info.setSceneName(s.name);
+    info.setParticleCount(static_cast<uint32_t>(m.particle_count));
+    info.setDt(s.integrator.dt);
+    info.setRateHz(sim_->config().headless ? 0.0 : sim_->config().rate_hz);
+    info.setHeadless(sim_->config().headless);
+    info.setForceLimit(force_limit(s));
+    auto rest = info.initRestPositions(3 * static_cast<unsigned>(m.particle_count));
+    const double* x = m.rest_position.data();
+    for (unsigned k = 0; k < rest.size(); ++k) rest.set(k, static_cast<float>(x[k]));
+    info.setTouchHeight(m.touch_height);
+    info.setRadius(m.indenter_radius);
+    info.setYoungModulus(s.material.young_modulus);
+    info.setPoissonRatio(s.material.poisson_ratio);
+    info.setBuildSeconds(sim_->build_seconds());
+    info.setSessionId(id_);
+  }
+
+  // --- Session methods -----------------------------------------------------
+
+  kj::Promise<void> setForce(SetForceContext context) override {
+    const double f = context.getParams().getNewtons();
+    const double limit = force_limit(sim_->model().scene);
+    if (!std::isfinite(f)) fail("setForce: newtons: must be a finite number, got " + std::to_string(f));
+    if (std::abs(f) > limit)
+      fail("setForce: newtons: |F| must be at most " + std::to_string(limit) + " N for this scene, got " +
+           std::to_string(f));
+    auto results = context.getResults();
+    results.setSeq(sim_->enqueue(CommandType::set_force, f));
+    results.setQueuedAtTick(sim_->newest_tick());
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> reset(ResetContext context) override {
+    context.getResults().setSeq(sim_->enqueue(CommandType::reset));
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> pause(PauseContext context) override {
+    if (sim_->config().headless) fail("pause: a headless session only advances in step()");
+    context.getResults().setSeq(sim_->enqueue(CommandType::pause));
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> resume(ResumeContext context) override {
+    if (sim_->config().headless) fail("resume: a headless session only advances in step()");
+    context.getResults().setSeq(sim_->enqueue(CommandType::resume));
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> subscribe(SubscribeContext context) override;
+
+  kj::Promise<void> step(StepContext context) override {
+    if (!sim_->config().headless) fail("step: only headless sessions are stepped by the client");
+    const uint32_t n = context.getParams().getN();
+    if (n < 1 || n > 1000000) fail("step: n: must be in [1, 1000000], got " + std::to_string(n));
+    if (job_.get() != nullptr) fail("step: a step() is already running in this session; wait for it");
+    const auto fields = context.getParams().getFields();
+    const bool positions = fields.getPositions(), contacts = fields.getContacts();
+    auto paf = kj::newPromiseAndFulfiller<void>();
+    job_ = kj::mv(paf.fulfiller);
+    sim_->request_steps(n);
+    return paf.promise.then([this, context, positions, contacts]() mutable {
+      fill_frame(context.getResults().initFrame(), sim_->frames().front(), positions, contacts);
+    });
+  }
+
+  kj::Promise<void> stats(StatsContext context) override {
+    const SimCounters c = sim_->counters();
+    auto s = context.getResults().initStats();
+    s.setTicks(c.ticks);
+    s.setElapsedSeconds(c.elapsed_s);
+    const bool headless = sim_->config().headless;
+    s.setTargetRateHz(headless ? 0.0 : sim_->config().rate_hz);
+    const double seconds = headless ? c.stepping_s : c.elapsed_s;
+    s.setAchievedRateHz(seconds > 0 ? c.ticks / seconds : 0.0);
+    fill_percentiles(s.initStepUs(), c.step_us);
+    fill_percentiles(s.initLatenessUs(), c.lateness_us);
+    s.setDeadlineMisses(c.deadline_misses);
+    s.setSkippedTicks(c.skipped_ticks);
+    s.setBlowUps(c.blow_ups);
+    s.setFramesPublished(c.frames_published);
+    s.setFramesCoalesced(c.frames_coalesced);
+    s.setRealtimePriority(c.realtime_priority);
+    s.setSpinMarginUs(sim_->config().spin_margin_us);
+    auto subs = s.initSubscribers(static_cast<unsigned>(subscribers_.size()));
+    unsigned k = 0;
+    for (const auto& sub : subscribers_) {
+      auto b = subs[k++];
+      b.setId(sub.id);
+      b.setRateHz(sub.rate_hz);
+      b.setSent(sub.sent);
+      b.setDropped(sub.dropped);
+      b.setInFlight(sub.in_flight);
+    }
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> status(StatusContext context) override {
+    const SimStatus st = sim_->status();
+    auto s = context.getResults().initStatus();
+    wire::RunState state = wire::RunState::RUNNING;
+    if (st.phase == Phase::starting) state = wire::RunState::STARTING;
+    else if (st.phase == Phase::failed) state = wire::RunState::FAILED;
+    else if (sim_->config().headless) state = wire::RunState::HEADLESS;
+    else if (st.paused) state = wire::RunState::PAUSED;
+    s.setState(state);
+    s.setTick(st.tick);
+    s.setSimTime(st.sim_time);
+    s.setForceCommand(st.force_command);
+    s.setBlowUps(st.blow_ups);
+    s.setLastBlowUp(st.last_blow_up);
+    s.setLastBlowUpTick(st.last_blow_up_tick);
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> info(InfoContext context) override {
+    fill_info(context.getResults().initInfo());
+    return kj::READY_NOW;
+  }
+
+  void unsubscribe(uint32_t id) {
+    for (auto it = subscribers_.begin(); it != subscribers_.end(); ++it)
+      if (it->id == id) {
+        spdlog::debug("session {}: subscriber {} left ({} sent, {} dropped)", id_, id, it->sent, it->dropped);
+        subscribers_.erase(it);  // cancels its in-flight send
+        break;
+      }
+    update_wanted();
+  }
+
+ private:
+  struct Subscriber {
+    uint32_t id;
+    wire::FrameSink::Client sink;
+    double rate_hz;
+    int64_t interval_ns;
+    bool positions, contacts;
+    bool in_flight = false;
+    bool dead = false;
+    int64_t next_due_ns = 0;
+    uint64_t sent = 0, dropped = 0;
+    kj::Promise<void> pending = nullptr;
+  };
+
+  kj::Promise<void> watch() {
+    return wake_->tryRead(wake_buffer_, sizeof wake_buffer_, sizeof wake_buffer_).then([this](size_t n) {
+      if (n == 0) return kj::Promise<void>(kj::READY_NOW);  // cannot happen for an eventfd
+      on_wake();
+      return watch();
+    });
+  }
+
+  void check_phase() {
+    if (phase_ != Phase::starting) return;
+    phase_ = sim_->phase();
+    if (phase_ == Phase::failed) error_ = sim_->status().error;
+  }
+
+  void on_wake() {
+    if (phase_ == Phase::starting) {
+      check_phase();
+      if (phase_ != Phase::starting) {
+        for (auto& f : ready_waiters_) {
+          if (phase_ == Phase::ready) f->fulfill();
+          else f->reject(kj::Exception(kj::Exception::Type::FAILED, __FILE__, __LINE__, kj::heapString(error_.c_str())));
+        }
+        ready_waiters_.clear();
+      }
+    }
+    if (phase_ != Phase::ready) return;
+    const bool job_done = sim_->take_job_done();
+    const bool fresh = sim_->frames().take();
+    if (job_done && job_.get() != nullptr) {
+      auto job = kj::mv(job_);
+      job_ = nullptr;
+      job->fulfill();
+    }
+    if (fresh) stream(sim_->frames().front());
+  }
+
+  void stream(const Snapshot& frame) {
+    const int64_t now = now_ns();
+    bool removed = false;
+    for (auto it = subscribers_.begin(); it != subscribers_.end();) {
+      Subscriber& sub = *it;
+      if (sub.dead) {
+        spdlog::debug("session {}: subscriber {} is gone", id_, sub.id);
+        it = subscribers_.erase(it);
+        removed = true;
+        continue;
+      }
+      ++it;
+      if (now < sub.next_due_ns) continue;
+      if (sub.in_flight) {  // due but busy: drop this frame (the newest wins next time)
+        ++sub.dropped;
+        sub.next_due_ns += sub.interval_ns;
+        if (sub.next_due_ns < now) sub.next_due_ns = now;
+        continue;
+      }
+      auto req = sub.sink.frameRequest(frame_size_hint(frame, sub.positions, sub.contacts));
+      fill_frame(req.initFrame(), frame, sub.positions, sub.contacts);
+      sub.in_flight = true;
+      ++sub.sent;
+      sub.next_due_ns += sub.interval_ns;
+      if (sub.next_due_ns < now) sub.next_due_ns = now;
+      Subscriber* s = &sub;
+      sub.pending = req.send().then([s]() { s->in_flight = false; },
+                                    [s](kj::Exception&&) {  // disconnected, or the sink threw
+                                      s->in_flight = false;
+                                      s->dead = true;
+                                    })
+                        .eagerlyEvaluate(nullptr);
+    }
+    if (removed) update_wanted();
+  }
+
+  void update_wanted() {
+    bool positions = false, contacts = false;
+    for (const auto& s : subscribers_) {
+      positions = positions || s.positions;
+      contacts = contacts || s.contacts;
+    }
+    sim_->set_wanted(positions, contacts);
+  }
+
+  friend class SubscriptionImpl;
+  ServerContext& ctx_;
+  uint32_t id_;
+  std::unique_ptr<Simulation> sim_;  // declared before the watchers: destroyed after them
+  kj::Own<kj::AsyncInputStream> wake_;
+  kj::Promise<void> wake_loop_ = nullptr;
+  uint8_t wake_buffer_[8] = {};
+  Phase phase_ = Phase::starting;
+  std::string error_;
+  kj::Vector<kj::Own<kj::PromiseFulfiller<void>>> ready_waiters_;
+  kj::Own<kj::PromiseFulfiller<void>> job_;
+  std::list<Subscriber> subscribers_;
+};
+
+// Releasing the handle (or losing the connection) unsubscribes. Holds the
+// session so that it outlives its subscriptions.
+class SubscriptionImpl final : public wire::Subscription::Server {
+ public:
+  SubscriptionImpl(wire::Session::Client session_cap, SessionImpl& session, uint32_t id)
+      : session_cap_(kj::mv(session_cap)), session_(session), id_(id) {}
+  ~SubscriptionImpl() noexcept(false) { session_.unsubscribe(id_); }
+
+ private:
+  wire::Session::Client session_cap_;
+  SessionImpl& session_;
+  uint32_t id_;
+};
+
+kj::Promise<void> SessionImpl::subscribe(SubscribeContext context) {
+  auto params = context.getParams();
+  auto options = params.getOptions();
+  const double rate = options.getRateHz();
+  if (!std::isfinite(rate) || rate < 0.0 || rate > 100000.0)
+    fail("subscribe: options.rateHz: must be in [0, 100000] (0 = every tick), got " + std::to_string(rate));
+  if (subscribers_.size() >= 64) fail("subscribe: this session already has 64 subscribers");
+  Subscriber sub{ctx_.next_subscriber_id++, params.getSink(), rate,
+                 rate > 0.0 ? static_cast<int64_t>(1e9 / rate) : 0, options.getFields().getPositions(),
+                 options.getFields().getContacts()};
+  sub.next_due_ns = now_ns();
+  const uint32_t id = sub.id;
+  subscribers_.push_back(kj::mv(sub));
+  update_wanted();
+  spdlog::debug("session {}: subscriber {} at {} Hz", id_, id, rate);
+  context.getResults().setSubscription(kj::heap<SubscriptionImpl>(thisCap(), *this, id));
+  return kj::READY_NOW;
+}
+
+// ---------------------------------------------------------------------------
+// ServerImpl
+
+kj::Promise<void> ServerImpl::version(VersionContext context) {
+  context.getResults().setProtocolVersion(wire::PROTOCOL_VERSION);
+  context.getResults().setServer("palpate-server 0.1");
+  return kj::READY_NOW;
+}
+
+kj::Promise<void> ServerImpl::listScenes(ListScenesContext context) {
+  const auto names = scene_names(ctx_.options.scene_dir);
+  auto list = context.getResults().initNames(static_cast<unsigned>(names.size()));
+  for (unsigned k = 0; k < names.size(); ++k) list.set(k, names[k]);
+  return kj::READY_NOW;
+}
+
+kj::Promise<void> ServerImpl::attach(AttachContext context) {
+  const uint32_t id = context.getParams().getSessionId();
+  const auto it = ctx_.sessions.find(id);
+  if (it == ctx_.sessions.end()) fail("attach: sessionId: no live session " + std::to_string(id));
+  SessionImpl& session = *it->second;
+  auto ready = session.when_ready();
+  return ready.then([context, cap = session.self(), &session]() mutable {
+    auto results = context.getResults();
+    session.fill_info(results.initInfo());
+    results.setSession(kj::mv(cap));
+  });
+}
+
+kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
+  auto request = context.getParams().getRequest();
+  SimConfig config;
+  config.headless = request.getHeadless();
+  config.spin_margin_us = ctx_.options.spin_margin_us;
+  config.try_realtime = ctx_.options.try_realtime;
+  config.checkpoint_interval = ctx_.options.checkpoint_interval;
+  const double rate = request.getRateHz();
+  if (!(rate == 0.0 || (rate > 0.0 && rate <= 10000.0)))
+    fail("openSession: request.rateHz: must be in (0, 10000] (0 = the server's rate), got " + std::to_string(rate));
+  config.rate_hz = rate == 0.0 ? ctx_.options.rate_hz : rate;
+  if (static_cast<int>(ctx_.sessions.size()) >= ctx_.options.max_sessions)
+    fail("openSession: the server already runs " + std::to_string(ctx_.sessions.size()) + " sessions (the limit)");
+
+  try {
+    SceneOverrides overrides;
+    for (auto o : request.getOverrides()) overrides.push_back(split_override(o.cStr(), "<rpc overrides>"));
+    auto scene = request.getScene();
+    switch (scene.which()) {
+      case wire::OpenRequest::Scene::SERVER_DEFAULT:
+        config.scene = load_scene(ctx_.options.default_scene, overrides);
+        break;
+      case wire::OpenRequest::Scene::NAME: {
+        const std::string name = scene.getName().cStr();
+        if (!plain_scene_name(name))
+          fail("openSession: request.scene.name: '" + name +
+               "' is not a plain scene name (letters, digits, '_', '-', '.'; no path)");
+        const fs::path file = ctx_.options.scene_dir / (name + ".json");
+        std::error_code ec;
+        if (!fs::is_regular_file(file, ec)) {
+          std::string known;
+          for (const auto& n : scene_names(ctx_.options.scene_dir)) known += (known.empty() ? "" : ", ") + n;
+          fail("openSession: request.scene.name: unknown scene '" + name + "' (known: " + known + ")");
+        }
+        config.scene = load_scene(file, overrides);
+        break;
+      }
+      case wire::OpenRequest::Scene::INLINE_SCENE:
+        config.scene = scene_from_wire(scene.getInlineScene(), "<rpc scene>", ctx_.options.scene_dir, overrides);
+        break;
+    }
+  } catch (const SceneError& e) {
+    fail(e.what());
+  }
+
+  // Bounded memory: refuse lattices beyond the server's particle limit before building.
+  if (const auto& d = config.scene.distribution; d.type != DistributionType::node_file) {
+    double count = 1.0;
+    for (int a = 0; a < 3; ++a) {
+      const double edge = config.scene.box.max[a] - config.scene.box.min[a];
+      count *= d.spacing > 0.0 ? std::round(edge / d.spacing) + 1.0 : d.per_edge;
+    }
+    if (count > ctx_.options.max_particles)
+      fail(config.scene.source + ": /body/distribution: " + std::to_string(static_cast<long long>(count)) +
+           " particles exceed this server's limit of " + std::to_string(ctx_.options.max_particles) +
+           " (palpate-server --max-particles)");
+  }
+
+  auto impl = kj::heap<SessionImpl>(ctx_, std::move(config));
+  SessionImpl& session = *impl;
+  wire::Session::Client cap = kj::mv(impl);
+  auto ready = session.when_ready();
+  return ready.then([context, cap = kj::mv(cap), &session]() mutable {
+    auto results = context.getResults();
+    session.fill_info(results.initInfo());
+    results.setSession(kj::mv(cap));
+  });
+}
+
+void ServerContext::stop_all() {
+  for (auto& [id, s] : sessions) s->stop();
+}
+
+}  // namespace palpate::server

@@ -1,0 +1,430 @@
+#include "server/sim_loop.h"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/eventfd.h>
+#include <sys/prctl.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+#include <spdlog/spdlog.h>
+
+#include "core/indentation.h"
+#include "core/step.h"
+
+namespace palpate::server {
+
+int64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
+}
+
+namespace {
+
+void sleep_until_ns(int64_t t) {
+  timespec ts{static_cast<time_t>(t / 1000000000), static_cast<long>(t % 1000000000)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+inline void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#endif
+}
+
+// A finite state that is already running away: a particle or the indenter more
+// than 10 box diagonals from its reference (such values would also overflow the
+// Float32 positions on the wire). One pass over 3 n doubles, no allocation.
+bool diverged(const Model& model, const State& state) {
+  const Vec3 diagonal = model.scene.box.max - model.scene.box.min;
+  const double bound = 10.0 * diagonal.norm();
+  const double worst = (state.position - model.rest_position).cwiseAbs().maxCoeff();
+  const double indenter = std::abs(state.indenter_center[2] - model.indenter_start[2]);
+  return !(worst <= bound) || !(indenter <= bound);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Histogram
+
+void Histogram::add(double us) {
+  if (!(us >= 0.0)) us = 0.0;
+  int bin;
+  if (us < kFine) bin = static_cast<int>(us);
+  else bin = std::min(kFine + static_cast<int>((us - kFine) / 1000.0), kFine + kCoarse);
+  bins_[bin].fetch_add(1, std::memory_order_relaxed);
+  count_.fetch_add(1, std::memory_order_relaxed);
+  if (us > max_.load(std::memory_order_relaxed)) max_.store(us, std::memory_order_relaxed);  // one writer
+}
+
+void Histogram::clear() {
+  for (auto& b : bins_) b.store(0, std::memory_order_relaxed);
+  count_.store(0, std::memory_order_relaxed);
+  max_.store(0.0, std::memory_order_relaxed);
+}
+
+Histogram::Summary Histogram::summary() const {
+  Summary s;
+  constexpr int kBins = kFine + kCoarse + 1;
+  std::vector<uint64_t> copy(kBins);
+  uint64_t total = 0;
+  for (int i = 0; i < kBins; ++i) total += copy[i] = bins_[i].load(std::memory_order_relaxed);
+  s.count = total;
+  s.max = max_.load(std::memory_order_relaxed);
+  if (total == 0) return s;
+  // Upper edge of the bin holding the q-quantile (capped by the exact maximum).
+  auto quantile = [&](double q) {
+    const uint64_t rank = static_cast<uint64_t>(std::ceil(q * static_cast<double>(total)));
+    uint64_t seen = 0;
+    for (int i = 0; i < kBins; ++i) {
+      seen += copy[i];
+      if (seen >= rank && copy[i] > 0) {
+        const double upper = i < kFine ? i + 1.0 : kFine + (i - kFine + 1) * 1000.0;
+        return std::min(upper, s.max);
+      }
+    }
+    return s.max;
+  };
+  s.p50 = quantile(0.50);
+  s.p99 = quantile(0.99);
+  return s;
+}
+
+// ---------------------------------------------------------------------------
+// Checkpoint: the fields of State that carry over between steps (Workspace is
+// scratch). Copies into preallocated storage, so saving and restoring allocate nothing.
+
+struct Simulation::Checkpoint {
+  Points position, velocity, contact_force;
+  Vec3 indenter_center{0, 0, 0};
+  double indenter_velocity = 0.0, indenter_contact_force = 0.0;
+  std::vector<int> contact_index;
+  std::vector<double> contact_multiplier;
+
+  explicit Checkpoint(const State& s) {
+    contact_index.reserve(s.contact_index.capacity());
+    contact_multiplier.reserve(s.contact_multiplier.capacity());
+    save(s);
+  }
+  void save(const State& s) {
+    position = s.position;
+    velocity = s.velocity;
+    contact_force = s.contact_force;
+    indenter_center = s.indenter_center;
+    indenter_velocity = s.indenter_velocity;
+    indenter_contact_force = s.indenter_contact_force;
+    contact_index.assign(s.contact_index.begin(), s.contact_index.end());
+    contact_multiplier.assign(s.contact_multiplier.begin(), s.contact_multiplier.end());
+  }
+  // Physical fields only: time, tick and the command are the caller's.
+  void restore(State& s) const {
+    s.position = position;
+    s.velocity = velocity;
+    s.contact_force = contact_force;
+    s.indenter_center = indenter_center;
+    s.indenter_velocity = indenter_velocity;
+    s.indenter_contact_force = indenter_contact_force;
+    s.contact_index.assign(contact_index.begin(), contact_index.end());
+    s.contact_multiplier.assign(contact_multiplier.begin(), contact_multiplier.end());
+  }
+};
+
+// ---------------------------------------------------------------------------
+// Simulation
+
+Simulation::Simulation(SimConfig config) : config_(std::move(config)) {
+  wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  if (wake_fd_ < 0) throw std::runtime_error(std::string("eventfd: ") + std::strerror(errno));
+  commands_.reserve(64);
+  drained_.reserve(64);
+  thread_ = std::thread([this] { run(); });
+}
+
+Simulation::~Simulation() {
+  stop();
+  if (wake_fd_ >= 0) close(wake_fd_);
+}
+
+void Simulation::stop() {
+  {
+    std::lock_guard<std::mutex> lock(job_mutex_);
+    stop_.store(true);
+  }
+  job_cv_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+uint64_t Simulation::enqueue(CommandType type, double value) {
+  std::lock_guard<std::mutex> lock(command_mutex_);
+  const uint64_t seq = next_seq_++;
+  if (commands_.size() < 4096) commands_.push_back({type, value, seq});  // bounded; clients are rate-limited anyway
+  return seq;
+}
+
+void Simulation::request_steps(uint32_t n) {
+  {
+    std::lock_guard<std::mutex> lock(job_mutex_);
+    job_ticks_ = n;
+    job_pending_ = true;
+  }
+  job_cv_.notify_all();
+}
+
+void Simulation::notify() {
+  const uint64_t one = 1;
+  [[maybe_unused]] const ssize_t r = write(wake_fd_, &one, sizeof one);  // never blocks (EFD_NONBLOCK)
+}
+
+SimCounters Simulation::counters() const {
+  SimCounters c;
+  c.ticks = ticks_.load(std::memory_order_relaxed);
+  const int64_t start = start_ns_.load(std::memory_order_relaxed);
+  const int64_t last = last_tick_ns_.load(std::memory_order_relaxed);
+  c.elapsed_s = start > 0 ? (config_.headless ? last - start : now_ns() - start) * 1e-9 : 0.0;
+  c.stepping_s = stepping_ns_.load(std::memory_order_relaxed) * 1e-9;
+  c.deadline_misses = deadline_misses_.load(std::memory_order_relaxed);
+  c.skipped_ticks = skipped_ticks_.load(std::memory_order_relaxed);
+  c.frames_published = frames_published_.load(std::memory_order_relaxed);
+  c.frames_coalesced = frames_coalesced_.load(std::memory_order_relaxed);
+  c.blow_ups = blow_ups_.load(std::memory_order_relaxed);
+  c.realtime_priority = realtime_priority_.load(std::memory_order_relaxed);
+  c.step_us = step_us_.summary();
+  c.lateness_us = lateness_us_.summary();
+  return c;
+}
+
+SimStatus Simulation::status() const {
+  SimStatus s;
+  s.phase = phase();
+  s.paused = paused_flag_.load(std::memory_order_relaxed);
+  s.tick = status_tick_.load(std::memory_order_relaxed);
+  s.sim_time = status_time_.load(std::memory_order_relaxed);
+  s.force_command = status_force_.load(std::memory_order_relaxed);
+  s.blow_ups = blow_ups_.load(std::memory_order_relaxed);
+  std::lock_guard<std::mutex> lock(text_mutex_);
+  s.last_blow_up = last_blow_up_;
+  s.last_blow_up_tick = last_blow_up_tick_;
+  s.error = error_;
+  return s;
+}
+
+void Simulation::run() {
+  // Threads inherit the creator's policy (the RPC thread may be SCHED_FIFO): model
+  // building and headless stepping run as ordinary threads; run_realtime() asks again.
+  sched_param normal{};
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
+  try {
+    const int64_t t0 = now_ns();
+    model_ = std::make_unique<Model>(build_model(config_.scene));
+    state_ = std::make_unique<State>(make_state(*model_));
+    rest_ = std::make_unique<Checkpoint>(*state_);
+    checkpoint_ = std::make_unique<Checkpoint>(*state_);
+    for (int i = 0; i < 3; ++i) frames_.slot(i).reserve(model_->particle_count);
+    build_seconds_ = (now_ns() - t0) * 1e-9;
+  } catch (const std::exception& e) {
+    {
+      std::lock_guard<std::mutex> lock(text_mutex_);
+      error_ = e.what();
+    }
+    phase_.store(Phase::failed, std::memory_order_release);
+    notify();
+    return;
+  }
+  status_force_.store(state_->force_command, std::memory_order_relaxed);
+  publish();  // the rest state, so a first frame exists
+  phase_.store(Phase::ready, std::memory_order_release);
+  notify();
+  if (config_.headless) run_headless();
+  else run_realtime();
+}
+
+void Simulation::run_headless() {
+  start_ns_.store(now_ns(), std::memory_order_relaxed);
+  last_tick_ns_.store(start_ns_.load(), std::memory_order_relaxed);
+  for (;;) {
+    uint32_t n = 0;
+    {
+      std::unique_lock<std::mutex> lock(job_mutex_);
+      job_cv_.wait(lock, [this] { return stop_.load() || job_pending_; });
+      if (stop_.load()) return;
+      n = job_ticks_;
+      job_pending_ = false;
+    }
+    for (uint32_t i = 0; i < n && !stop_.load(std::memory_order_relaxed); ++i) tick_once();
+    last_tick_ns_.store(now_ns(), std::memory_order_relaxed);
+    publish();
+    job_done_.store(true, std::memory_order_release);
+    notify();
+  }
+}
+
+void Simulation::run_realtime() {
+  prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0);
+  if (config_.try_realtime) {
+    sched_param param{};
+    param.sched_priority = 10;
+    if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) == 0) realtime_priority_.store(true);
+  }
+  const int64_t period = static_cast<int64_t>(std::llround(1e9 / config_.rate_hz));
+  const int64_t margin = static_cast<int64_t>(config_.spin_margin_us * 1000.0);
+  const int64_t start = now_ns();
+  start_ns_.store(start, std::memory_order_relaxed);
+  int64_t deadline = start + period;
+  while (!stop_.load(std::memory_order_relaxed)) {
+    // Wait for the absolute deadline: sleep to a margin before it, then spin.
+    if (now_ns() < deadline - margin) sleep_until_ns(deadline - margin);
+    while (now_ns() < deadline) cpu_relax();
+    const int64_t tick_start = now_ns();
+    lateness_us_.add((tick_start - deadline) * 1e-3);
+    if (tick_start - deadline > 5 * period)
+      spdlog::debug("tick {} started {:.1f} ms late", state_->tick, (tick_start - deadline) * 1e-6);
+
+    if (tick_once()) publish();
+
+    const int64_t end = now_ns();
+    last_tick_ns_.store(end, std::memory_order_relaxed);
+    deadline += period;
+    if (end > deadline) {
+      deadline_misses_.fetch_add(1, std::memory_order_relaxed);
+      if (end > deadline + period) {  // over a full period behind: abandon deadlines, keep the phase grid
+        const int64_t behind = (end - deadline) / period;
+        deadline += behind * period;
+        skipped_ticks_.fetch_add(static_cast<uint64_t>(behind), std::memory_order_relaxed);
+      }
+    }
+  }
+}
+
+bool Simulation::tick_once() {
+  const Model& model = *model_;
+  State& state = *state_;
+  {
+    // Real time never waits for the RPC thread: if it holds the queue right now,
+    // the commands are applied next tick. Headless always drains (determinism).
+    std::unique_lock<std::mutex> lock(command_mutex_, std::defer_lock);
+    if (config_.headless) lock.lock();
+    else (void)lock.try_lock();
+    if (lock.owns_lock()) drained_.swap(commands_);  // both keep their capacity
+  }
+  for (const Command& c : drained_) {
+    switch (c.type) {
+      case CommandType::set_force: state.force_command = c.value; break;
+      case CommandType::reset: {
+        rest_->restore(state);
+        checkpoint_->save(state);
+        state.time = 0.0;
+        state.tick = 0;
+        state.force_command = model.scene.indenter.force;
+        ticks_since_recovery_ = -1;
+        break;
+      }
+      case CommandType::pause: paused_ = true; break;
+      case CommandType::resume: paused_ = false; break;
+    }
+    applied_seq_ = c.seq;
+  }
+  const bool had_commands = !drained_.empty();
+  drained_.clear();
+  paused_flag_.store(paused_, std::memory_order_relaxed);
+  status_force_.store(state.force_command, std::memory_order_relaxed);
+  if (paused_ && !config_.headless) {
+    if (had_commands) publish();  // let subscribers see a reset while paused
+    return false;
+  }
+
+  const int64_t t0 = now_ns();
+  const StepStatus status = step(model, state);
+  const int64_t t1 = now_ns();
+  step_us_.add((t1 - t0) * 1e-3);
+  stepping_ns_.fetch_add(t1 - t0, std::memory_order_relaxed);
+  ticks_.fetch_add(1, std::memory_order_relaxed);
+  if (ticks_since_recovery_ >= 0) ++ticks_since_recovery_;
+
+  if (status == StepStatus::non_finite) recover("non-finite state");
+  else if (!std::isfinite(state.indenter_contact_force)) recover("non-finite contact force");
+  else if (diverged(model, state)) recover("diverged state (displacement beyond 10 box diagonals)");
+  else if (config_.checkpoint_interval > 0 && state.tick % config_.checkpoint_interval == 0) checkpoint_->save(state);
+  return true;
+}
+
+// Restores the last good state. A second blow-up soon after a recovery means the
+// checkpoint itself was on its way out (or the command cannot be held): restore
+// the rest state and the scene's initial force instead.
+void Simulation::recover(const char* what) {
+  const Model& model = *model_;
+  State& state = *state_;
+  const uint32_t count = blow_ups_.fetch_add(1, std::memory_order_relaxed) + 1;
+  const bool again = ticks_since_recovery_ >= 0 && ticks_since_recovery_ <= 2 * config_.checkpoint_interval;
+  std::string how;
+  const double command = state.force_command;
+  if (again) {
+    rest_->restore(state);
+    checkpoint_->save(state);
+    state.force_command = model.scene.indenter.force;
+    how = "restored the rest state and the scene's initial force (" + std::to_string(state.force_command) +
+          " N; the command was " + std::to_string(command) + " N)";
+  } else {
+    checkpoint_->restore(state);
+    how = "restored the last checkpoint (every " + std::to_string(config_.checkpoint_interval) + " ticks)";
+  }
+  ticks_since_recovery_ = 0;
+  const std::string message = std::string(what) + " at tick " + std::to_string(state.tick) + ": " + how;
+  {
+    std::lock_guard<std::mutex> lock(text_mutex_);
+    last_blow_up_ = message;
+    last_blow_up_tick_ = state.tick;
+  }
+  spdlog::warn("session blow-up #{}: {}", count, message);
+}
+
+void Simulation::publish() {
+  const Model& model = *model_;
+  const State& state = *state_;
+  Snapshot& s = frames_.back();
+  s.tick = state.tick;
+  s.sim_time = state.time;
+  s.indenter[0] = state.indenter_center[0];
+  s.indenter[1] = state.indenter_center[1];
+  s.indenter[2] = state.indenter_center[2];
+  s.indenter_velocity = state.indenter_velocity;
+  s.contact_force = state.indenter_contact_force;
+  s.indentation = indentation(model, state);
+  s.force_command = state.force_command;
+  s.command_seq = applied_seq_;
+  s.recoveries = blow_ups_.load(std::memory_order_relaxed);
+  s.has_positions = config_.headless || want_positions_.load(std::memory_order_relaxed);
+  s.has_contacts = config_.headless || want_contacts_.load(std::memory_order_relaxed);
+  s.positions.clear();
+  if (s.has_positions) {
+    const int n = model.particle_count;
+    s.positions.resize(3 * static_cast<size_t>(n));  // within the reserved capacity
+    const double* p = state.position.data();
+    for (size_t k = 0; k < s.positions.size(); ++k) s.positions[k] = static_cast<float>(p[k]);
+  }
+  s.contact_nodes.clear();
+  s.contact_forces.clear();
+  if (s.has_contacts) {
+    const size_t m = state.contact_index.size();
+    for (size_t c = 0; c < m; ++c) {
+      s.contact_nodes.push_back(static_cast<uint32_t>(state.contact_index[c]));
+      for (int a = 0; a < 3; ++a) s.contact_forces.push_back(static_cast<float>(state.contact_force(a, c)));
+    }
+  }
+  s.publish_ns = now_ns();
+  status_tick_.store(state.tick, std::memory_order_relaxed);
+  status_time_.store(state.time, std::memory_order_relaxed);
+  frames_published_.fetch_add(1, std::memory_order_relaxed);
+  if (frames_.publish()) frames_coalesced_.fetch_add(1, std::memory_order_relaxed);
+  notify();
+}
+
+}  // namespace palpate::server

@@ -1,0 +1,623 @@
+// End-to-end tests of palpate-server: the real server process on a loopback port
+// (picked by the system: --listen 127.0.0.1:0, the port read from its first
+// stdout line), driven by real Cap'n Proto clients.
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <fstream>
+#include <mutex>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <capnp/ez-rpc.h>
+#include <capnp/message.h>
+#include <capnp/serialize.h>
+#include <gtest/gtest.h>
+#include <kj/async-io.h>
+#include <kj/timer.h>
+
+#include "protocol/palpate.capnp.h"
+
+namespace {
+
+using palpate::wire::FrameSink;
+using palpate::wire::PalpateServer;
+using palpate::wire::Session;
+
+// ---------------------------------------------------------------------------
+// The server process.
+
+class ServerProcess {
+ public:
+  ServerProcess() {
+    int out[2];
+    if (pipe(out) != 0) std::abort();
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], STDOUT_FILENO);
+      close(out[0]);
+      close(out[1]);
+      execl(PALPATE_SERVER_BIN, PALPATE_SERVER_BIN, "--listen", "127.0.0.1:0", "--scene-dir",
+            PALPATE_SOURCE_DIR "/scenes", "--log-level", "error", static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(out[1]);
+    // Readiness: the "listening on 127.0.0.1:PORT" line (bounded wait).
+    std::string line;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    fcntl(out[0], F_SETFL, O_NONBLOCK);
+    while (line.find('\n') == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+      char buf[256];
+      const ssize_t n = read(out[0], buf, sizeof buf);
+      if (n > 0) line.append(buf, static_cast<size_t>(n));
+      else if (n == 0) break;
+      else std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    stdout_fd_ = out[0];
+    const auto colon = line.rfind(':');
+    if (line.find("listening on") == std::string::npos || colon == std::string::npos) {
+      std::fprintf(stderr, "server did not start: '%s'\n", line.c_str());
+      std::abort();
+    }
+    port_ = std::stoi(line.substr(colon + 1));
+  }
+  ~ServerProcess() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+    close(stdout_fd_);
+  }
+  int port() const { return port_; }
+  pid_t pid() const { return pid_; }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  bool alive() const { return kill(pid_, 0) == 0 && waitpid(pid_, nullptr, WNOHANG) == 0; }
+  long rss_kb() const {
+    std::ifstream f("/proc/" + std::to_string(pid_) + "/status");
+    std::string key;
+    long value = -1;
+    while (f >> key) {
+      if (key == "VmRSS:") {
+        f >> value;
+        break;
+      }
+      std::getline(f, key);
+    }
+    return value;
+  }
+  // SIGTERM; the exit status, or -1 if it did not exit within the timeout.
+  int terminate(std::chrono::milliseconds timeout) {
+    kill(pid_, SIGTERM);
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return -1;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int stdout_fd_ = -1;
+  int port_ = 0;
+};
+
+ServerProcess* g_server = nullptr;
+
+class ServerEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override { g_server = new ServerProcess(); }
+  void TearDown() override {
+    ASSERT_TRUE(g_server->alive()) << "the server died during the tests";
+    EXPECT_EQ(g_server->terminate(std::chrono::seconds(5)), 0) << "no clean exit on SIGTERM";
+    delete g_server;
+    g_server = nullptr;
+  }
+};
+
+// ---------------------------------------------------------------------------
+// Client helpers.
+
+struct FrameRecord {
+  int64_t tick;
+  double contact_force, force_command, indenter_z;
+  uint64_t command_seq;
+  size_t positions;
+  bool finite;
+};
+
+class RecordingSink final : public FrameSink::Server {
+ public:
+  std::vector<FrameRecord> frames;
+  bool finished = false;
+
+ protected:
+  kj::Promise<void> frame(FrameContext context) override {
+    auto f = context.getParams().getFrame();
+    FrameRecord r{f.getTick(), f.getIndenterContactForce(), f.getForceCommand(), f.getIndenterPosition().getZ(),
+                  f.getCommandSeq(), f.getPositions().size(), true};
+    r.finite = std::isfinite(r.contact_force) && std::isfinite(r.indenter_z) && std::isfinite(f.getIndentation()) &&
+               std::isfinite(f.getIndenterVelocity());
+    for (float x : f.getPositions()) r.finite = r.finite && std::isfinite(x);
+    for (float x : f.getContactForces()) r.finite = r.finite && std::isfinite(x);
+    frames.push_back(r);
+    return kj::READY_NOW;
+  }
+  kj::Promise<void> done(DoneContext) override {
+    finished = true;
+    return kj::READY_NOW;
+  }
+};
+
+struct Client {
+  Client() : ez(g_server->address()), server(ez.getMain<PalpateServer>()) {}
+  capnp::EzRpcClient ez;
+  PalpateServer::Client server;
+  kj::WaitScope& ws() { return ez.getWaitScope(); }
+  void pump(int ms) { ez.getIoProvider().getTimer().afterDelay(ms * kj::MILLISECONDS).wait(ws()); }
+
+  // hertz_cube with overrides ("key=value").
+  Session::Client open(bool headless, std::vector<std::string> overrides = {"body.distribution.per_edge=8"}) {
+    auto req = server.openSessionRequest();
+    auto r = req.initRequest();
+    r.getScene().setName("hertz_cube");
+    auto o = r.initOverrides(static_cast<unsigned>(overrides.size()));
+    for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
+    r.setHeadless(headless);
+    return req.send().wait(ws()).getSession();
+  }
+
+  // The error message of a failing call, or "" if it succeeded.
+  template <class Request>
+  std::string error_of(Request&& req) {
+    try {
+      req.send().wait(ws());
+    } catch (const kj::Exception& e) {
+      return e.getDescription().cStr();
+    }
+    return "";
+  }
+};
+
+std::vector<uint8_t> frame_bytes(palpate::wire::Frame::Reader frame) {
+  capnp::MallocMessageBuilder mb;
+  mb.setRoot(frame);
+  mb.getRoot<palpate::wire::Frame>().setPublishNs(0);  // wall clock: the only non-deterministic field
+  auto words = capnp::messageToFlatArray(mb);
+  auto bytes = words.asBytes();
+  return {bytes.begin(), bytes.end()};
+}
+
+double achieved_rate(Client& c, Session::Client& s) {
+  return s.statsRequest().send().wait(c.ws()).getStats().getAchievedRateHz();
+}
+
+// ---------------------------------------------------------------------------
+
+TEST(ServerE2E, VersionAndSessionStreams) {
+  Client c;
+  auto v = c.server.versionRequest().send().wait(c.ws());
+  EXPECT_EQ(v.getProtocolVersion(), palpate::wire::PROTOCOL_VERSION);
+
+  auto session = c.open(false);
+  auto sink_owner = kj::heap<RecordingSink>();
+  RecordingSink& sink = *sink_owner;
+  auto sub = session.subscribeRequest();
+  sub.setSink(kj::mv(sink_owner));
+  sub.getOptions().setRateHz(100);
+  sub.getOptions().getFields().setPositions(true);
+  auto handle = sub.send().wait(c.ws()).getSubscription();
+  c.pump(500);
+  ASSERT_GE(sink.frames.size(), 30u);
+  EXPECT_LE(sink.frames.size(), 60u);  // rate-limited to 100 Hz
+  EXPECT_EQ(sink.frames.back().positions, 3u * 8 * 8 * 8);
+  for (size_t k = 1; k < sink.frames.size(); ++k) EXPECT_GT(sink.frames[k].tick, sink.frames[k - 1].tick);
+
+  auto status_response = session.statusRequest().send().wait(c.ws());
+
+  auto status = status_response.getStatus();
+  EXPECT_EQ(status.getState(), palpate::wire::RunState::RUNNING);
+  // Dropping the handle unsubscribes: no more frames.
+  handle = nullptr;
+  c.pump(50);
+  const size_t count = sink.frames.size();
+  c.pump(200);
+  EXPECT_EQ(sink.frames.size(), count);
+}
+
+TEST(ServerE2E, ForceCommandReachesTheStreamWithinTwoTicks) {
+  Client c;
+  auto session = c.open(false);
+  auto sink_owner = kj::heap<RecordingSink>();
+  RecordingSink& sink = *sink_owner;
+  auto sub = session.subscribeRequest();
+  sub.setSink(kj::mv(sink_owner));
+  sub.getOptions().setRateHz(0);  // every tick
+  auto handle = sub.send().wait(c.ws()).getSubscription();
+  c.pump(200);
+
+  int observed = 0;
+  for (int attempt = 0; attempt < 10 && observed < 3; ++attempt) {
+    const double force = attempt % 2 == 0 ? 40.0 : 0.0;
+    const size_t before = sink.frames.size();
+    const double contact_before = before > 0 ? sink.frames.back().contact_force : 0.0;
+    auto req = session.setForceRequest();
+    req.setNewtons(force);
+    auto res = req.send().wait(c.ws());
+    const uint64_t seq = res.getSeq();
+    const int64_t queued = res.getQueuedAtTick();
+    c.pump(100);
+    // The first frame that reflects the command, and the one before it.
+    for (size_t k = std::max<size_t>(before, 1); k < sink.frames.size(); ++k) {
+      if (sink.frames[k].command_seq < seq) continue;
+      const FrameRecord& first = sink.frames[k];
+      EXPECT_EQ(first.force_command, force);
+      EXPECT_LE(first.tick, queued + 2) << "command applied more than 2 ticks after it was queued";
+      if (sink.frames[k - 1].tick == first.tick - 1 && sink.frames[k - 1].command_seq < seq) {
+        ++observed;  // gapless: the contact force of the first tick under the new command changed
+        EXPECT_GT(std::abs(first.contact_force - contact_before), 1.0)
+            << "contact force did not respond in the first tick (" << contact_before << " -> " << first.contact_force
+            << ")";
+      }
+      break;
+    }
+  }
+  EXPECT_GE(observed, 1) << "never saw a gapless command transition";
+}
+
+TEST(ServerE2E, PauseResumeAndAttach) {
+  Client c;
+  auto session = c.open(false);
+  const uint32_t id = session.infoRequest().send().wait(c.ws()).getInfo().getSessionId();
+  session.pauseRequest().send().wait(c.ws());
+  c.pump(50);
+  const int64_t t0 = session.statusRequest().send().wait(c.ws()).getStatus().getTick();
+  EXPECT_EQ(session.statusRequest().send().wait(c.ws()).getStatus().getState(), palpate::wire::RunState::PAUSED);
+  c.pump(100);
+  EXPECT_EQ(session.statusRequest().send().wait(c.ws()).getStatus().getTick(), t0);
+  session.resumeRequest().send().wait(c.ws());
+  c.pump(100);
+  EXPECT_GT(session.statusRequest().send().wait(c.ws()).getStatus().getTick(), t0 + 50);
+
+  // A second connection attaches to the same session by id.
+  Client viewer;
+  auto att = viewer.server.attachRequest();
+  att.setSessionId(id);
+  auto same = att.send().wait(viewer.ws()).getSession();
+  auto set = session.setForceRequest();
+  set.setNewtons(12.5);
+  set.send().wait(c.ws());
+  c.pump(20);
+  EXPECT_EQ(same.statusRequest().send().wait(viewer.ws()).getStatus().getForceCommand(), 12.5);
+  auto bad = viewer.server.attachRequest();
+  bad.setSessionId(999999);
+  EXPECT_NE(viewer.error_of(bad).find("sessionId"), std::string::npos);
+}
+
+TEST(ServerE2E, HeadlessIsDeterministic) {
+  Client c;
+  auto run_script = [&]() {
+    auto session = c.open(true);
+    std::vector<std::vector<uint8_t>> frames;
+    for (double force : {30.0, 60.0, 10.0}) {
+      auto f = session.setForceRequest();
+      f.setNewtons(force);
+      f.send().wait(c.ws());
+      auto step = session.stepRequest();
+      step.setN(150);
+      step.getFields().setPositions(true);
+      step.getFields().setContacts(true);
+      auto resp = step.send().wait(c.ws());
+      EXPECT_EQ(resp.getFrame().getPositions().size(), 3u * 512);
+      frames.push_back(frame_bytes(resp.getFrame()));
+    }
+    auto r = session.resetRequest().send().wait(c.ws());
+    (void)r;
+    auto step = session.stepRequest();
+    step.setN(10);
+    auto resp = step.send().wait(c.ws());
+    EXPECT_EQ(resp.getFrame().getTick(), 10);  // reset brought the tick back to 0
+    frames.push_back(frame_bytes(resp.getFrame()));
+    return frames;
+  };
+  const auto a = run_script();
+  const auto b = run_script();
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t k = 0; k < a.size(); ++k) EXPECT_TRUE(a[k] == b[k]) << "frame " << k << " differs";
+}
+
+TEST(ServerE2E, BadScenesAreRefusedNamingTheField) {
+  Client c;
+  {  // unknown scene name
+    auto req = c.server.openSessionRequest();
+    req.initRequest().getScene().setName("no_such_scene");
+    const std::string e = c.error_of(req);
+    EXPECT_NE(e.find("unknown scene 'no_such_scene'"), std::string::npos) << e;
+    EXPECT_NE(e.find("hertz_cube"), std::string::npos) << e;  // lists the known ones
+  }
+  {  // a path instead of a name
+    auto req = c.server.openSessionRequest();
+    req.initRequest().getScene().setName("../etc/passwd");
+    EXPECT_NE(c.error_of(req).find("not a plain scene name"), std::string::npos);
+  }
+  {  // malformed inline scene: out-of-range Poisson ratio
+    auto req = c.server.openSessionRequest();
+    auto scene = req.initRequest().getScene().initInlineScene();
+    scene.initMaterial().setPoissonRatio(0.7);
+    const std::string e = c.error_of(req);
+    EXPECT_NE(e.find("/material/poisson_ratio"), std::string::npos) << e;
+    EXPECT_NE(e.find("0.7"), std::string::npos) << e;
+  }
+  {  // malformed inline scene: a vector of two components, NaN in a float
+    auto req = c.server.openSessionRequest();
+    auto scene = req.initRequest().getScene().initInlineScene();
+    auto g = scene.initGravity(2);
+    g.set(0, 0);
+    g.set(1, 0);
+    std::string e = c.error_of(req);
+    EXPECT_NE(e.find("/gravity"), std::string::npos) << e;
+
+    auto req2 = c.server.openSessionRequest();
+    req2.initRequest().getScene().initInlineScene().initIntegrator().setDt(std::nan(""));
+    e = c.error_of(req2);
+    EXPECT_NE(e.find("/integrator/dt"), std::string::npos) << e;
+  }
+  {  // out-of-range parameter through an override, and a bad model name
+    auto req = c.server.openSessionRequest();
+    auto r = req.initRequest();
+    r.getScene().setName("hertz_cube");
+    r.initOverrides(1).set(0, "mls.neighbors=2");
+    const std::string e = c.error_of(req);
+    EXPECT_NE(e.find("/mls/neighbors"), std::string::npos) << e;
+
+    auto req2 = c.server.openSessionRequest();
+    req2.initRequest().getScene().initInlineScene().setModel("fem9000");
+    EXPECT_NE(c.error_of(req2).find("/model"), std::string::npos);
+
+    auto req3 = c.server.openSessionRequest();
+    req3.initRequest().setRateHz(1e9);
+    EXPECT_NE(c.error_of(req3).find("rateHz"), std::string::npos);
+
+    auto req4 = c.server.openSessionRequest();  // 200^3 particles: beyond the server's memory bound
+    auto r4 = req4.initRequest();
+    r4.getScene().setName("hertz_cube");
+    r4.initOverrides(1).set(0, "body.distribution.per_edge=200");
+    EXPECT_NE(c.error_of(req4).find("/body/distribution"), std::string::npos);
+  }
+  {  // a valid inline scene opens
+    auto req = c.server.openSessionRequest();
+    auto r = req.initRequest();
+    auto scene = r.getScene().initInlineScene();
+    scene.initBody().initDistribution().setPerEdge(6);
+    scene.initMaterial().setYoungModulus(2e4);
+    r.setHeadless(true);
+    auto info_response = req.send().wait(c.ws());
+    auto info = info_response.getInfo();
+    EXPECT_EQ(info.getParticleCount(), 216u);
+    EXPECT_EQ(info.getYoungModulus(), 2e4);
+  }
+}
+
+TEST(ServerE2E, AbsurdForcesAreRefusedAndTheStateIsUntouched) {
+  Client c;
+  auto session = c.open(true);
+  auto set = session.setForceRequest();
+  set.setNewtons(25.0);
+  set.send().wait(c.ws());
+  auto step = session.stepRequest();
+  step.setN(20);
+  const auto before = frame_bytes(step.send().wait(c.ws()).getFrame());
+  const double limit = session.infoRequest().send().wait(c.ws()).getInfo().getForceLimit();
+  EXPECT_GT(limit, 1000.0);
+
+  for (double bad : std::vector<double>{std::nan(""), HUGE_VAL, -HUGE_VAL, 1e12, -2.0 * limit}) {
+    auto req = session.setForceRequest();
+    req.setNewtons(bad);
+    const std::string e = c.error_of(req);
+    EXPECT_NE(e.find("newtons"), std::string::npos) << bad << ": " << e;
+  }
+  auto status_response = session.statusRequest().send().wait(c.ws());
+  auto status = status_response.getStatus();
+  EXPECT_EQ(status.getForceCommand(), 25.0);
+  // A fresh session given the accepted commands only reaches the same frame.
+  auto twin = c.open(true);
+  auto set2 = twin.setForceRequest();
+  set2.setNewtons(25.0);
+  set2.send().wait(c.ws());
+  auto step2 = twin.stepRequest();
+  step2.setN(20);
+  EXPECT_TRUE(frame_bytes(step2.send().wait(c.ws()).getFrame()) == before);
+  // Both continue identically (nothing was queued by the refused calls).
+  auto s1 = session.stepRequest();
+  s1.setN(5);
+  auto s2 = twin.stepRequest();
+  s2.setN(5);
+  EXPECT_TRUE(frame_bytes(s1.send().wait(c.ws()).getFrame()) == frame_bytes(s2.send().wait(c.ws()).getFrame()));
+  // Real-time only / headless only calls are refused with a reason.
+  EXPECT_NE(c.error_of(session.pauseRequest()).find("headless"), std::string::npos);
+  auto zero = session.stepRequest();
+  zero.setN(0);
+  EXPECT_NE(c.error_of(zero).find("n: must be in"), std::string::npos);
+}
+
+TEST(ServerE2E, BlowUpIsDetectedRecoveredAndNeverStreamed) {
+  Client c;
+  // E = 1e9 Pa at dt = 1 ms is far beyond RK4's stability limit for this cloud.
+  const std::vector<std::string> unstable = {"body.distribution.per_edge=8", "material.young_modulus=1e9"};
+  {  // headless
+    auto session = c.open(true, unstable);
+    auto set = session.setForceRequest();
+    set.setNewtons(100.0);
+    set.send().wait(c.ws());
+    for (int k = 0; k < 4; ++k) {
+      auto step = session.stepRequest();
+      step.setN(250);
+      step.getFields().setPositions(true);
+      auto frame_response = step.send().wait(c.ws());
+      auto frame = frame_response.getFrame();
+      EXPECT_TRUE(std::isfinite(frame.getIndenterContactForce()));
+      for (float x : frame.getPositions()) ASSERT_TRUE(std::isfinite(x));
+    }
+    auto status_response = session.statusRequest().send().wait(c.ws());
+    auto status = status_response.getStatus();
+    EXPECT_GE(status.getBlowUps(), 1u);
+    EXPECT_NE(std::string(status.getLastBlowUp().cStr()).find("restored"), std::string::npos)
+        << status.getLastBlowUp().cStr();
+  }
+  {  // real time, streamed with every field
+    auto session = c.open(false, unstable);
+    auto sink_owner = kj::heap<RecordingSink>();
+    RecordingSink& sink = *sink_owner;
+    auto sub = session.subscribeRequest();
+    sub.setSink(kj::mv(sink_owner));
+    sub.getOptions().setRateHz(0);
+    sub.getOptions().getFields().setPositions(true);
+    sub.getOptions().getFields().setContacts(true);
+    auto handle = sub.send().wait(c.ws()).getSubscription();
+    auto set = session.setForceRequest();
+    set.setNewtons(100.0);
+    set.send().wait(c.ws());
+    c.pump(1000);
+    auto status_response = session.statusRequest().send().wait(c.ws());
+    auto status = status_response.getStatus();
+    EXPECT_GE(status.getBlowUps(), 1u);
+    EXPECT_EQ(status.getState(), palpate::wire::RunState::RUNNING);
+    ASSERT_GT(sink.frames.size(), 100u);
+    for (const auto& f : sink.frames) ASSERT_TRUE(f.finite) << "non-finite frame at tick " << f.tick;
+    EXPECT_GT(achieved_rate(c, session), 900.0);
+  }
+}
+
+// A client that subscribes to every tick with all positions and then never reads
+// (its thread stops running its event loop), while another session is measured.
+TEST(ServerE2E, StalledAndVanishingClientsCostOthersNothing) {
+  std::mutex m;
+  std::condition_variable cv;
+  bool subscribed = false, release = false;
+  std::thread stalled([&] {
+    Client s;
+    auto session = s.open(false);
+    auto sub = session.subscribeRequest();
+    sub.setSink(kj::heap<RecordingSink>());
+    sub.getOptions().setRateHz(0);
+    sub.getOptions().getFields().setPositions(true);
+    auto handle = sub.send().wait(s.ws()).getSubscription();
+    {
+      std::lock_guard<std::mutex> lock(m);
+      subscribed = true;
+    }
+    cv.notify_all();
+    std::unique_lock<std::mutex> lock(m);
+    cv.wait_for(lock, std::chrono::seconds(20), [&] { return release; });  // never reads meanwhile
+  });
+  {
+    std::unique_lock<std::mutex> lock(m);
+    cv.wait_for(lock, std::chrono::seconds(10), [&] { return subscribed; });
+  }
+
+  Client c;
+  auto session = c.open(false);
+  auto sink_owner = kj::heap<RecordingSink>();
+  RecordingSink& sink = *sink_owner;
+  auto sub = session.subscribeRequest();
+  sub.setSink(kj::mv(sink_owner));
+  sub.getOptions().setRateHz(0);
+  auto handle = sub.send().wait(c.ws()).getSubscription();
+
+  // Clients that vanish mid-stream (their connection closes with frames in flight).
+  for (int k = 0; k < 3; ++k) {
+    Client gone;
+    auto s = gone.open(false);
+    auto req = s.subscribeRequest();
+    req.setSink(kj::heap<RecordingSink>());
+    req.getOptions().setRateHz(0);
+    req.getOptions().getFields().setPositions(true);
+    auto h = req.send().wait(gone.ws()).getSubscription();
+    gone.pump(100);
+  }
+  sink.frames.clear();
+  c.pump(1500);
+  const double rate = achieved_rate(c, session);
+  {
+    std::lock_guard<std::mutex> lock(m);
+    release = true;
+  }
+  cv.notify_all();
+  stalled.join();
+  EXPECT_GT(rate, 950.0);
+  EXPECT_GT(sink.frames.size(), 1200u) << "the full-rate subscriber lost frames to a stalled neighbour";
+  EXPECT_TRUE(g_server->alive());
+}
+
+TEST(ServerE2E, GarbageBytesAndConnectionChurn) {
+  // Garbage on the port.
+  for (int k = 0; k < 5; ++k) {
+    const int fd = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<uint16_t>(g_server->port()));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+    std::mt19937 rng(k);
+    std::vector<uint8_t> junk(k == 0 ? 8 : 65536);
+    for (auto& b : junk) b = static_cast<uint8_t>(rng());
+    if (k == 1) std::fill(junk.begin(), junk.begin() + 8, 0xff);  // an absurd segment count
+    [[maybe_unused]] const ssize_t n = write(fd, junk.data(), junk.size());
+    close(fd);
+  }
+  {
+    Client c;
+    EXPECT_EQ(c.server.versionRequest().send().wait(c.ws()).getProtocolVersion(), palpate::wire::PROTOCOL_VERSION);
+  }
+  // 100 connect / open / disconnect cycles; memory must not grow.
+  auto cycle = [](int k) {
+    Client c;
+    if (k % 4 == 0) {
+      auto s = c.open(k % 8 == 0);
+      auto req = s.subscribeRequest();
+      req.setSink(kj::heap<RecordingSink>());
+      req.getOptions().setRateHz(200);
+      req.getOptions().getFields().setPositions(true);
+      auto h = req.send().wait(c.ws()).getSubscription();
+      c.pump(5);
+    } else {
+      c.server.versionRequest().send().wait(c.ws());
+    }
+  };
+  for (int k = 0; k < 20; ++k) cycle(k);  // warm-up: allocator pools
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const long rss_before = g_server->rss_kb();
+  for (int k = 0; k < 100; ++k) cycle(k);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const long rss_after = g_server->rss_kb();
+  std::printf("server RSS %ld kB -> %ld kB over 100 cycles\n", rss_before, rss_after);
+  EXPECT_LT(rss_after - rss_before, 4096) << "RSS grew by " << (rss_after - rss_before) << " kB";
+  Client c;
+  auto list_response = c.server.listScenesRequest().send().wait(c.ws());
+  auto list = list_response.getNames();
+  EXPECT_GE(list.size(), 1u);
+  EXPECT_TRUE(g_server->alive());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  ::testing::AddGlobalTestEnvironment(new ServerEnvironment);
+  return RUN_ALL_TESTS();
+}

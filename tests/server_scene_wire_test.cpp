@@ -1,0 +1,93 @@
+// Wire scenes (protocol/palpate.capnp) and scene files share one validator:
+// protocol/scene_wire.h turns a wire scene into scene-file JSON.
+#include <capnp/message.h>
+#include <gtest/gtest.h>
+
+#include "core/scene.h"
+#include "protocol/scene_wire.h"
+
+namespace palpate {
+namespace {
+
+TEST(SceneWire, DefaultWireSceneIsTheEmptyJsonObject) {
+  capnp::MallocMessageBuilder mb;
+  auto scene = mb.initRoot<wire::Scene>();
+  scene.initMaterial();  // a set but default-valued section adds nothing
+  EXPECT_EQ(scene_to_json(scene), "{\"material\":{}}");
+  const Scene s = scene_from_wire(scene, "<rpc scene>", ".");
+  const Scene d = parse_scene("{}", "<rpc scene>", ".");
+  EXPECT_EQ(s.material.young_modulus, d.material.young_modulus);
+  EXPECT_EQ(s.distribution.per_edge, d.distribution.per_edge);
+  EXPECT_EQ(s.fixed_faces, d.fixed_faces);
+  EXPECT_FALSE(s.indenter.position_given);
+}
+
+TEST(SceneWire, SnakeCaseNamesAndEnumerants) {
+  capnp::MallocMessageBuilder mb;
+  auto scene = mb.initRoot<wire::Scene>();
+  auto dist = scene.initBody().initDistribution();
+  dist.setType(wire::DistributionType::JITTERED_GRID);
+  dist.setPerEdge(7);
+  scene.initIntegrator().setType(wire::IntegratorType::SYMPLECTIC_EULER);
+  auto fixed = scene.initFixed(2);
+  fixed.set(0, wire::Face::BOTTOM);
+  fixed.set(1, wire::Face::X_MIN);
+  const std::string json = scene_to_json(scene);
+  EXPECT_NE(json.find("\"per_edge\":7"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"jittered_grid\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"symplectic_euler\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"x_min\""), std::string::npos) << json;
+  const Scene s = scene_from_wire(scene, "<rpc scene>", ".");
+  EXPECT_EQ(s.distribution.type, DistributionType::jittered_grid);
+  EXPECT_EQ(s.distribution.per_edge, 7);
+  EXPECT_EQ(s.integrator.type, IntegratorType::symplectic_euler);
+  EXPECT_EQ(s.fixed_faces, face_bottom | face_x_min);
+}
+
+TEST(SceneWire, SceneFileRoundTripsThroughTheWire) {
+  const Scene file = load_scene(PALPATE_SOURCE_DIR "/scenes/hertz_cube.json");
+  // JSON file -> wire struct -> JSON -> Scene.
+  std::string text;
+  {
+    std::FILE* f = std::fopen(PALPATE_SOURCE_DIR "/scenes/hertz_cube.json", "rb");
+    ASSERT_NE(f, nullptr);
+    char buf[4096];
+    for (size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) text.append(buf, n);
+    std::fclose(f);
+  }
+  capnp::MallocMessageBuilder mb;
+  auto scene = mb.initRoot<wire::Scene>();
+  scene_json_to_wire(text, "hertz_cube.json", scene);
+  const Scene wire = scene_from_wire(scene, "hertz_cube", PALPATE_SOURCE_DIR "/scenes");
+  EXPECT_EQ(wire.name, file.name);
+  EXPECT_EQ(wire.distribution.per_edge, file.distribution.per_edge);
+  EXPECT_EQ(wire.mls.volumes, file.mls.volumes);
+  EXPECT_EQ(wire.integrator.damping, file.integrator.damping);
+  EXPECT_EQ(wire.verify.forces, file.verify.forces);
+  EXPECT_EQ(wire.box.min, file.box.min);
+  EXPECT_EQ(wire.fixed_faces, file.fixed_faces);
+}
+
+TEST(SceneWire, ErrorsNameTheField) {
+  capnp::MallocMessageBuilder mb;
+  auto scene = mb.initRoot<wire::Scene>();
+  scene.initContact().setMaxIterations(0);
+  try {
+    scene_from_wire(scene, "<rpc scene>", ".");
+    FAIL() << "accepted max_iterations = 0";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/contact/max_iterations");
+    EXPECT_EQ(e.source(), "<rpc scene>");
+  }
+  scene.initContact();
+  scene.initIndenter().setRadius(INFINITY);  // encoded as the string "Infinity": refused at its field
+  try {
+    scene_from_wire(scene, "<rpc scene>", ".");
+    FAIL() << "accepted an infinite radius";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/indenter/radius");
+  }
+}
+
+}  // namespace
+}  // namespace palpate
