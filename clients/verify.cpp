@@ -2,6 +2,9 @@
 // the body come to rest (physics.md §2) and compares the indentation with Hertz
 // theory, plain and corrected for the finite layer (physics.md §3).
 #include <chrono>
+#include <filesystem>
+#include <memory>
+#include <optional>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -15,6 +18,8 @@
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/model.h"
+#include "core/reference.h"
+#include "core/static_contact.h"
 #include "core/scene.h"
 #include "core/state.h"
 #include "core/step.h"
@@ -37,6 +42,13 @@ compares the indentation d with Hertz theory.
   --quiet             no progress on stderr
   --trace SECONDS     print the state every SECONDS of simulated time (stderr)
   --log-level LEVEL   spdlog level (default: warn)
+  --solve MODE        dynamic (default): step the scene's integrator until rest;
+                      static: the quasi-static solve (exact for the linear hex FEM,
+                      pseudo-transient continuation for the nonlinear models)
+  --reference WHAT    the finite-block reference (palpate-reference) the errors are
+                      also measured against: auto (default; a stored reference with the
+                      scene's key in the scene folder's references/), FILE, compute
+                      (compute it now: minutes), or none
 Indentation d: travel of the indenter below the height at which it touches the
 undeformed surface (the highest particle under it); with the sphere centred
 between lattice particles d includes the strain-free sinking between them. Errors: (d_sim - d_ref) / d_ref; the L2 error
@@ -44,7 +56,7 @@ is ||d_sim - d_ref|| / ||d_ref|| over the sweep.
 )";
 
 struct Row {
-  double force = 0, d_sim = NAN, d_hertz = 0, d_layer = 0;
+  double force = 0, d_sim = NAN, d_hertz = 0, d_layer = 0, d_ref = NAN, d_ref_uncertainty = NAN;
   double contact_force = 0;
   long steps = 0;
   double sim_time = 0, wall_seconds = 0;
@@ -83,7 +95,8 @@ int main(int argc, char** argv) {
   std::string scene_file, csv_file, log_level = "warn";
   SceneOverrides overrides;
   std::vector<double> forces;
-  bool json = false, quiet = false;
+  bool json = false, quiet = false, static_solve = false;
+  std::string reference_choice = "auto";
   double trace_interval = 0;
   try {
     for (int a = 1; a < argc; ++a) {
@@ -105,6 +118,12 @@ int main(int argc, char** argv) {
       else if (arg == "--quiet") quiet = true;
       else if (arg == "--trace") trace_interval = std::stod(value());
       else if (arg == "--log-level") log_level = value();
+      else if (arg == "--solve") {
+        const std::string mode = value();
+        if (mode != "dynamic" && mode != "static")
+          throw std::invalid_argument("--solve: expected dynamic or static, got '" + mode + "'");
+        static_solve = mode == "static";
+      } else if (arg == "--reference") reference_choice = value();
       else if (arg == "--help" || arg == "-h") {
         std::cout << kUsage;
         return 0;
@@ -143,7 +162,39 @@ int main(int argc, char** argv) {
                  model.total_volume, model.box_volume, to_string(scene.integrator.type), scene.integrator.dt,
                  scene.integrator.damping);
 
+  // The finite-block reference (core/reference.h).
+  std::optional<Reference> reference;
+  std::string reference_note;
+  try {
+    if (reference_choice == "auto") {
+      const auto folder = std::filesystem::path(scene_file).parent_path() / "references";
+      reference = find_reference(scene, folder);
+      if (!reference)
+        reference_note = "no stored reference for this scene in " + folder.string() +
+                         " (palpate-reference --scene ... --out, or --reference compute)";
+    } else if (reference_choice == "compute") {
+      reference = finite_cube_reference(scene, forces, {}, [&](const std::string& m) {
+        if (!quiet) std::fprintf(stderr, "palpate-verify: %s\n", m.c_str());
+      });
+    } else if (reference_choice != "none") {
+      std::ifstream in(reference_choice);
+      if (!in) throw std::runtime_error("--reference: cannot read " + reference_choice);
+      std::stringstream text;
+      text << in.rdbuf();
+      reference = reference_from_json(text.str());
+      if (reference->key != reference_key(scene))
+        throw std::runtime_error("--reference: " + reference_choice + " is for '" + reference->key +
+                                 "', the scene is '" + reference_key(scene) + "'");
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-verify: " << e.what() << "\n";
+    return 1;
+  }
+  if (!quiet && !reference_note.empty()) std::fprintf(stderr, "palpate-verify: %s\n", reference_note.c_str());
+
   State state = make_state(model);
+  std::unique_ptr<LinearStaticContact> linear_static;
+  if (static_solve && has_linear_static_solve(model)) linear_static = std::make_unique<LinearStaticContact>(model);
   std::vector<Row> rows;
   for (size_t k = 0; k < forces.size(); ++k) {
     Row row;
@@ -154,8 +205,21 @@ int main(int argc, char** argv) {
     } catch (const std::domain_error&) {
       row.d_layer = NAN;
     }
+    if (reference) {
+      row.d_ref = reference_indentation(*reference, row.force);
+      for (size_t f = 0; f < reference->forces.size(); ++f)
+        if (std::abs(reference->forces[f] - row.force) <= 1e-9 * row.force)
+          row.d_ref_uncertainty = reference->uncertainty[f];
+    }
     const auto start = std::chrono::steady_clock::now();
     const double t0 = state.time;
+    if (static_solve) {
+      const StaticSolution sol =
+          linear_static ? linear_static->solve(row.force, &state) : relax_to_rest(model, state, row.force);
+      row.steps = sol.iterations;
+      row.at_rest = sol.converged;
+      if (!sol.converged && !quiet) std::fprintf(stderr, "    static solve: %s\n", sol.message.c_str());
+    } else {
     const long trace_every = trace_interval > 0 ? std::max(1L, std::lround(trace_interval / scene.integrator.dt)) : 0;
     const PressResult press = press_to_rest(model, state, row.force, [&](const State& s) {
       if (trace_every > 0 && s.tick % trace_every == 0)
@@ -166,6 +230,7 @@ int main(int argc, char** argv) {
     row.steps = press.steps;
     row.at_rest = press.at_rest;
     if (press.status == StepStatus::non_finite) row.status = "diverged";
+    }
     row.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     row.sim_time = state.time - t0;
     if (row.status == "diverged") {
@@ -184,6 +249,7 @@ int main(int argc, char** argv) {
 
   const double l2_hertz = l2_error(rows, &Row::d_hertz);
   const double l2_layer = l2_error(rows, &Row::d_layer);
+  const double l2_reference = l2_error(rows, &Row::d_ref);
   bool all_ok = true;
   for (const Row& r : rows) all_ok = all_ok && r.status == "ok";
 
@@ -212,6 +278,9 @@ int main(int argc, char** argv) {
     auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
     out["l2_error_hertz"] = num(l2_hertz);
     out["l2_error_finite_layer"] = num(l2_layer);
+    out["l2_error_reference"] = num(l2_reference);
+    out["reference"] = reference ? nlohmann::json(reference->key) : nlohmann::json(nullptr);
+    out["solve"] = static_solve ? "static" : "dynamic";
     out["all_at_rest"] = all_ok;
     nlohmann::json list = nlohmann::json::array();
     for (const Row& r : rows)
@@ -221,6 +290,9 @@ int main(int argc, char** argv) {
                       {"d_finite_layer", num(r.d_layer)},
                       {"error_hertz", num((r.d_sim - r.d_hertz) / r.d_hertz)},
                       {"error_finite_layer", num((r.d_sim - r.d_layer) / r.d_layer)},
+                      {"d_reference", num(r.d_ref)},
+                      {"d_reference_uncertainty", num(r.d_ref_uncertainty)},
+                      {"error_reference", num((r.d_sim - r.d_ref) / r.d_ref)},
                       {"contact_force", r.contact_force},
                       {"steps", r.steps},
                       {"sim_time", r.sim_time},
@@ -232,14 +304,18 @@ int main(int argc, char** argv) {
     std::printf("\nHertz indentation, scene %s: %d particles, k = %d, alpha = %g, %s dt = %g s\n", scene.name.c_str(),
                 model.particle_count, scene.mls.neighbors, scene.mls.support_factor, to_string(scene.integrator.type),
                 scene.integrator.dt);
-    std::printf("%10s %10s %10s %10s %9s %9s %8s %9s  %s\n", "F [N]", "d_sim [m]", "d_Hertz", "d_layer",
-                "err_H", "err_layer", "steps", "wall [s]", "status");
+    std::printf("%10s %10s %10s %10s %10s %9s %9s %9s %8s %9s  %s\n", "F [N]", "d_sim [m]", "d_Hertz", "d_layer",
+                "d_ref", "err_H", "err_layer", "err_ref", "steps", "wall [s]", "status");
     for (const Row& r : rows)
-      std::printf("%10.3f %10.5f %10.5f %10.5f %8.1f%% %8.1f%% %8ld %9.2f  %s\n", r.force, r.d_sim, r.d_hertz,
-                  r.d_layer, 100 * (r.d_sim - r.d_hertz) / r.d_hertz, 100 * (r.d_sim - r.d_layer) / r.d_layer,
-                  r.steps, r.wall_seconds, r.status.c_str());
-    std::printf("L2 error against Hertz: %.2f %%, against finite-layer Hertz: %.2f %%\n", 100 * l2_hertz,
-                100 * l2_layer);
+      std::printf("%10.3f %10.5f %10.5f %10.5f %10.5f %8.1f%% %8.1f%% %8.1f%% %8ld %9.2f  %s\n", r.force, r.d_sim,
+                  r.d_hertz, r.d_layer, r.d_ref, 100 * (r.d_sim - r.d_hertz) / r.d_hertz,
+                  100 * (r.d_sim - r.d_layer) / r.d_layer, 100 * (r.d_sim - r.d_ref) / r.d_ref, r.steps,
+                  r.wall_seconds, r.status.c_str());
+    std::printf("L2 error against Hertz: %.2f %%, against finite-layer Hertz: %.2f %%, against the finite-block "
+                "reference: %.2f %%\n",
+                100 * l2_hertz, 100 * l2_layer, 100 * l2_reference);
+    std::printf("d_ref: %s\n", reference ? ("linear hex FEM, graded, extrapolated (" + reference->key + ")").c_str()
+                                         : reference_note.c_str());
   }
   return all_ok ? 0 : 3;
 }

@@ -1,5 +1,6 @@
 #include "core/node_cloud.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <random>
@@ -10,33 +11,46 @@ namespace palpate {
 
 namespace {
 
-// Per-axis lattice coordinates and the 1-D cell length owned by each node
-// (half a spacing at the two ends), so that the product of three of them is the
-// node's share of the box volume.
-void axis_lattice(double lo, double hi, int count, std::vector<double>& coord,
-                  std::vector<double>& share) {
-  coord.resize(count);
-  share.resize(count);
-  const double h = (hi - lo) / (count - 1);
-  for (int a = 0; a < count; ++a) {
-    coord[a] = (a == count - 1) ? hi : lo + a * h;
-    share[a] = (a == 0 || a == count - 1) ? 0.5 * h : h;
+// The 1-D cell length owned by each node of an axis (half of each adjacent
+// interval), so that the product of three of them is the node's share of the box.
+std::vector<double> axis_shares(const std::vector<double>& coord) {
+  const size_t count = coord.size();
+  std::vector<double> share(count, 0.0);
+  for (size_t a = 0; a + 1 < count; ++a) {
+    const double half = 0.5 * (coord[a + 1] - coord[a]);
+    share[a] += half;
+    share[a + 1] += half;
   }
+  return share;
 }
 
-}  // namespace
-
-Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing) {
-  Eigen::Vector3i n;
-  for (int c = 0; c < 3; ++c) n[c] = static_cast<int>(std::lround((box.max[c] - box.min[c]) / spacing)) + 1;
-  return n;
+std::vector<double> uniform_axis(double lo, double hi, int count) {
+  std::vector<double> coord(count);
+  const double h = (hi - lo) / (count - 1);
+  for (int a = 0; a < count; ++a) coord[a] = (a == count - 1) ? hi : lo + a * h;
+  return coord;
 }
 
-NodeCloud grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis) {
-  std::vector<double> coord[3], share[3];
+// Ratio r > 0 of the geometric series s (1 + r + ... + r^(n-1)) = length (bisection on log r).
+double geometric_ratio(double first, double length, int intervals) {
+  auto sum = [&](double r) {
+    return std::abs(r - 1.0) < 1e-12 ? first * intervals : first * (std::pow(r, intervals) - 1.0) / (r - 1.0);
+  };
+  double lo = std::log(1e-3), hi = std::log(1e3);
+  for (int it = 0; it < 200; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (sum(std::exp(mid)) < length ? lo : hi) = mid;
+  }
+  return std::exp(0.5 * (lo + hi));
+}
+
+// Node lattice built from three axis coordinate lists; volumes from the axis shares.
+NodeCloud tensor_lattice(const std::vector<double> (&coord)[3]) {
+  std::vector<double> share[3];
+  Eigen::Vector3i per_axis;
   for (int c = 0; c < 3; ++c) {
-    if (per_axis[c] < 2) throw std::invalid_argument("grid_nodes: at least 2 nodes per axis");
-    axis_lattice(box.min[c], box.max[c], per_axis[c], coord[c], share[c]);
+    share[c] = axis_shares(coord[c]);
+    per_axis[c] = static_cast<int>(coord[c].size());
   }
   NodeCloud cloud;
   const int n = per_axis.prod();
@@ -51,6 +65,71 @@ NodeCloud grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis) {
         cloud.lattice_volume[i] = share[0][a] * share[1][b] * share[2][c];
       }
   return cloud;
+}
+
+}  // namespace
+
+Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing) {
+  Eigen::Vector3i n;
+  for (int c = 0; c < 3; ++c) n[c] = static_cast<int>(std::lround((box.max[c] - box.min[c]) / spacing)) + 1;
+  return n;
+}
+
+NodeCloud grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis) {
+  std::vector<double> coord[3];
+  for (int c = 0; c < 3; ++c) {
+    if (per_axis[c] < 2) throw std::invalid_argument("grid_nodes: at least 2 nodes per axis");
+    coord[c] = uniform_axis(box.min[c], box.max[c], per_axis[c]);
+  }
+  return tensor_lattice(coord);
+}
+
+std::vector<double> graded_axis(double lo, double hi, double focus, int count, double first_spacing) {
+  if (count < 2) throw std::invalid_argument("graded lattice: at least 2 nodes per axis");
+  if (!(focus >= lo && focus <= hi)) throw std::invalid_argument("graded lattice: the focus is outside the box");
+  const int intervals = count - 1;
+  const double below = focus - lo, above = hi - focus;
+  // Intervals on each side of the focus in proportion to its length (at least one on a side
+  // of positive length); a focus on a face grades one-sidedly.
+  int n_below = below <= 0 ? 0 : above <= 0 ? intervals
+                                            : static_cast<int>(std::lround(intervals * below / (below + above)));
+  if (below > 0 && above > 0) n_below = std::clamp(n_below, 1, intervals - 1);
+  if (below > 0 && above > 0 && intervals < 2)
+    throw std::invalid_argument("graded lattice: a focus inside the box needs at least 3 nodes per axis");
+  const int n_above = intervals - n_below;
+  std::vector<double> coord(count);
+  coord[n_below] = focus;
+  for (int side = 0; side < 2; ++side) {
+    const int n = side == 0 ? n_below : n_above;
+    const double length = side == 0 ? below : above;
+    if (n == 0) continue;
+    if (!(first_spacing < length || n == 1))
+      throw std::invalid_argument("graded lattice: the first spacing " + std::to_string(first_spacing) +
+                                  " m does not fit a side of " + std::to_string(length) + " m");
+    const double r = n == 1 ? 1.0 : geometric_ratio(first_spacing, length, n);
+    double h = n == 1 ? length : first_spacing, x = focus;
+    for (int k = 1; k <= n; ++k, h *= r) {
+      x += side == 0 ? -h : h;
+      coord[side == 0 ? n_below - k : n_below + k] = x;
+    }
+    coord[side == 0 ? 0 : count - 1] = side == 0 ? lo : hi;  // exact ends
+  }
+  return coord;
+}
+
+NodeCloud graded_grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis, const Vec3& focus,
+                            double first_spacing) {
+  std::vector<double> coord[3];
+  for (int c = 0; c < 3; ++c) coord[c] = graded_axis(box.min[c], box.max[c], focus[c], per_axis[c], first_spacing);
+  return tensor_lattice(coord);
+}
+
+Vec3 graded_focus(const Scene& scene) {
+  if (scene.distribution.focus_given) return scene.distribution.focus;
+  const Vec3 centre = 0.5 * (scene.box.min + scene.box.max);
+  const bool placed = scene.indenter.position_given;
+  return Vec3(placed ? scene.indenter.position[0] : centre[0], placed ? scene.indenter.position[1] : centre[1],
+              scene.box.max[2]);
 }
 
 NodeCloud jittered_grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis, double jitter,
@@ -106,6 +185,8 @@ NodeCloud make_node_cloud(const Scene& scene) {
   switch (d.type) {
     case DistributionType::grid: return grid_nodes(scene.box, per_axis);
     case DistributionType::jittered_grid: return jittered_grid_nodes(scene.box, per_axis, d.jitter, d.seed);
+    case DistributionType::graded_grid:
+      return graded_grid_nodes(scene.box, per_axis, graded_focus(scene), d.first_spacing);
     case DistributionType::node_file: return load_node_list(d.node_file);
   }
   throw std::logic_error("make_node_cloud: unknown distribution");

@@ -23,6 +23,17 @@ Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing);
 // most jitter * spacing per component; nodes on a face stay on it.
 NodeCloud jittered_grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis, double jitter,
                               uint64_t seed);
+// Coordinates of `count` nodes on [lo, hi] graded geometrically away from `focus`:
+// the two intervals next to the focus (one if it lies on an end) are `first_spacing`
+// long, the following ones grow by a constant ratio per side. Throws
+// std::invalid_argument when the spacing does not fit.
+std::vector<double> graded_axis(double lo, double hi, double focus, int count, double first_spacing);
+// Tensor-product lattice of three graded axes (per_axis nodes each), with lattice volumes.
+NodeCloud graded_grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis, const Vec3& focus,
+                            double first_spacing);
+// The focus of a scene's graded lattice: distribution.focus, else the top-face point
+// under the indenter's start (the centre of the top face by default).
+Vec3 graded_focus(const Scene& scene);
 // Plain node list: "x y z" per line; blank lines and lines starting with '#' are
 // skipped. Throws std::runtime_error naming file, line and reason.
 NodeCloud load_node_list(const std::filesystem::path& file);

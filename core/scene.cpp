@@ -5,6 +5,8 @@
 // error is thrown as a SceneError(source, pointer, reason).
 #include "core/scene.h"
 
+#include "core/node_cloud.h"
+
 #include <algorithm>
 #include <charconv>
 #include <cerrno>
@@ -54,6 +56,7 @@ constexpr Named<HexFormulation> kHexFormulations[] = {
 constexpr Named<DistributionType> kDistributions[] = {
     {"grid", DistributionType::grid},
     {"jittered_grid", DistributionType::jittered_grid},
+    {"graded_grid", DistributionType::graded_grid},
     {"node_file", DistributionType::node_file},
 };
 
@@ -119,7 +122,7 @@ std::string describe(const json& v) {
   std::string s = v.type_name();
   if (v.is_array()) return s + " of " + std::to_string(v.size()) + (v.size() == 1 ? " element" : " elements");
   if (v.is_primitive() && !v.is_null()) {
-    std::string text = v.dump();
+    std::string text = v.dump(-1, ' ', false, json::error_handler_t::replace);  // a bare override may be bad UTF-8
     if (text.size() > 40) text = text.substr(0, 37) + "...";
     s += " " + text;
   }
@@ -322,12 +325,17 @@ void read_box(const Reader& r, BoxSpec& box) {
 }
 
 void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base_dir, DistributionSpec& d) {
-  r.object({"type", "per_edge", "spacing", "jitter", "seed", "node_file"});
+  r.object({"type", "per_edge", "spacing", "jitter", "seed", "first_spacing", "focus", "node_file"});
   r["type"].get(d.type, "distribution type", kDistributions);
   r["per_edge"].get(d.per_edge, 2, 200);
   r["spacing"].get(d.spacing, at_least(0.0));
   r["jitter"].get(d.jitter, closed_open(0.0, 0.5));
   r["seed"].get(d.seed);
+  r["first_spacing"].get(d.first_spacing, positive());
+  if (r["focus"].present()) {
+    r["focus"].get(d.focus);
+    d.focus_given = true;
+  }
   std::string node_file;
   r["node_file"].get(node_file);
 
@@ -358,6 +366,27 @@ void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base
       f.fail("node file '" + node_file + "' not found (resolved to " + d.node_file.string() + ")");
     if (fs::is_directory(status))
       f.fail("node file '" + node_file + "' is a directory (resolved to " + d.node_file.string() + ")");
+  }
+}
+
+// A graded lattice must fit its box: the focus inside, the first spacing shorter than
+// every side it grades.
+void check_graded_grid(const Reader& r, const Scene& s) {
+  const Vec3 focus = graded_focus(s);
+  constexpr char kAxis[] = "xyz";
+  for (int a = 0; a < 3; ++a)
+    if (!(focus[a] >= s.box.min[a] && focus[a] <= s.box.max[a]))
+      r["focus"].fail(std::string("the focus must lie in the box (") + kAxis[a] + " = " + fmt(focus[a]) +
+                      " is outside [" + fmt(s.box.min[a]) + ", " + fmt(s.box.max[a]) + "])");
+  const Eigen::Vector3i per_axis = s.distribution.spacing > 0 ? nodes_per_axis(s.box, s.distribution.spacing)
+                                                              : Eigen::Vector3i::Constant(s.distribution.per_edge);
+  for (int a = 0; a < 3; ++a) {
+    try {
+      graded_axis(s.box.min[a], s.box.max[a], focus[a], per_axis[a], s.distribution.first_spacing);
+    } catch (const std::invalid_argument& e) {
+      r["first_spacing"].fail(std::string(e.what()).substr(std::string("graded lattice: ").size()) + " along " +
+                              kAxis[a]);
+    }
   }
 }
 
@@ -455,11 +484,13 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   read_body(r["body"], base_dir, s);
   read_mls(r["mls"], s.distribution.type, s.mls);
   read_hex_fem(r["hex_fem"], s.hex_fem);
-  if (s.model == "hex_fem" && s.distribution.type != DistributionType::grid)
-    r["body"]["distribution"]["type"].fail("the hex_fem model meshes a lattice: use a 'grid' distribution");
+  if (s.model == "hex_fem" && s.distribution.type != DistributionType::grid &&
+      s.distribution.type != DistributionType::graded_grid)
+    r["body"]["distribution"]["type"].fail("the hex_fem model meshes a lattice: use a 'grid' or 'graded_grid' distribution");
   read_material(r["material"], s.material);
   read_fixed(r["fixed"], s.fixed_faces);
   read_indenter(r["indenter"], s.indenter);
+  if (s.distribution.type == DistributionType::graded_grid) check_graded_grid(r["body"]["distribution"], s);
   read_contact(r["contact"], s.contact);
   read_integrator(r["integrator"], s.integrator);
   read_gravity(r["gravity"], s.gravity);

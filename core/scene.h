@@ -28,7 +28,7 @@ class SceneError : public std::runtime_error {
   std::string source_, field_, reason_;
 };
 
-enum class DistributionType { grid, jittered_grid, node_file };
+enum class DistributionType { grid, jittered_grid, graded_grid, node_file };
 enum class VolumeRule { kernel, lattice };  // kernel sums, or lattice cell volumes
 enum class IntegratorType { rk4, symplectic_euler, implicit_euler };
 
@@ -53,6 +53,9 @@ struct DistributionSpec {
   int per_edge = 18;          // nodes per box edge (grid, jittered_grid) when spacing == 0
   double spacing = 0.0;       // m; > 0 chooses the lattice by spacing instead of per_edge
   double jitter = 0.3;        // jittered_grid: displacement bound as a fraction of the spacing
+  double first_spacing = 0.025;  // graded_grid: the lattice spacing next to the focus, m
+  bool focus_given = false;      // graded_grid: false = the centre of the top face (the indenter's site)
+  Vec3 focus{0.0, 0.0, 0.0};     // graded_grid: the point the lattice is graded toward, m
   uint64_t seed = 1;          // jittered_grid: random seed
   std::filesystem::path node_file;  // node_file: "x y z" per line; holds the absolute path, resolved
                                     // against the scene file's folder

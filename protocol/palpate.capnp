@@ -30,6 +30,7 @@ enum DistributionType {
   grid @0;
   jitteredGrid @1 $Json.name("jittered_grid");
   nodeFile @2 $Json.name("node_file");
+  gradedGrid @3 $Json.name("graded_grid");   # geometric lattice graded toward a focus
 }
 enum VolumeRule {
   kernel @0;   # (A-2, A-3) kernel sums
@@ -65,6 +66,8 @@ struct Distribution {
   jitter @3 :Float64 = 0.3;                            # [0, 0.5), fraction of the spacing
   seed @4 :UInt32 = 1;                                 # jittered_grid (the wire carries 32 bits)
   nodeFile @5 :Text $Json.name("node_file");           # path on the server, relative to --scene-dir
+  firstSpacing @6 :Float64 = 0.025 $Json.name("first_spacing");  # graded_grid: spacing at the focus, m
+  focus @7 :List(Float64);                             # graded_grid: [x, y, z], m; null = top face under the indenter
 }
 struct Body {
   box @0 :Box;

@@ -31,6 +31,38 @@ TEST(NodeCloud, GridByCountAndBySpacing) {
   EXPECT_EQ(nodes_per_axis(unit_box(), 0.25), Eigen::Vector3i(9, 5, 5));
 }
 
+TEST(NodeCloud, GradedAxisIsGeometricFromTheFocus) {
+  // One-sided (focus on an end): first interval = s, constant ratio, ends exact.
+  const std::vector<double> z = graded_axis(-2.0, 0.0, 0.0, 21, 0.025);
+  ASSERT_EQ(z.size(), 21u);
+  EXPECT_DOUBLE_EQ(z.front(), -2.0);
+  EXPECT_DOUBLE_EQ(z.back(), 0.0);
+  EXPECT_NEAR(z[20] - z[19], 0.025, 1e-12);
+  const double r = (z[19] - z[18]) / (z[20] - z[19]);
+  EXPECT_GT(r, 1.0);
+  for (int k = 1; k + 1 < 20; ++k) EXPECT_NEAR((z[k] - z[k - 1]) / (z[k + 1] - z[k]), r, 1e-9);
+  // Two-sided, focus in the middle: a node on the focus, symmetric spacings.
+  const std::vector<double> x = graded_axis(-1.0, 1.0, 0.0, 21, 0.025);
+  EXPECT_DOUBLE_EQ(x[10], 0.0);
+  for (int k = 0; k < 21; ++k) EXPECT_NEAR(x[k], -x[20 - k], 1e-12);
+  EXPECT_NEAR(x[11] - x[10], 0.025, 1e-12);
+  EXPECT_THROW(graded_axis(0.0, 1.0, 0.0, 5, 2.0), std::invalid_argument);
+  EXPECT_THROW(graded_axis(0.0, 1.0, 1.5, 5, 0.1), std::invalid_argument);
+}
+
+TEST(NodeCloud, GradedGridVolumesFillTheBox) {
+  BoxSpec box;  // the default 2 m cube, top face at z = 0
+  const NodeCloud c = graded_grid_nodes(box, Eigen::Vector3i(15, 15, 15), Vec3(0, 0, 0), 0.03);
+  EXPECT_EQ(c.lattice_size, Eigen::Vector3i(15, 15, 15));
+  double volume = 0;
+  for (double v : c.lattice_volume) volume += v;
+  EXPECT_NEAR(volume, 8.0, 1e-12);
+  // The node nearest the focus is the focus itself, its neighbour 0.03 m away.
+  const Eigen::Index centre = 7 + 15 * (7 + 15 * 14);
+  EXPECT_NEAR(c.positions.col(centre).norm(), 0.0, 1e-12);
+  EXPECT_NEAR((c.positions.col(centre + 1) - c.positions.col(centre)).norm(), 0.03, 1e-12);
+}
+
 TEST(NodeCloud, JitteredGridIsSeededBoundedAndKeepsFaces) {
   const Eigen::Vector3i n(9, 5, 5);
   const NodeCloud base = grid_nodes(unit_box(), n);

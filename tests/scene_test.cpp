@@ -350,7 +350,7 @@ TEST(SceneErrors, BadEnums) {
 
   e = error_of(R"({"body": {"distribution": {"type": "random"}}})");
   EXPECT_EQ(e.field(), "/body/distribution/type");
-  EXPECT_EQ(e.reason(), "unknown distribution type 'random' (known: grid, jittered_grid, node_file)");
+  EXPECT_EQ(e.reason(), "unknown distribution type 'random' (known: grid, jittered_grid, graded_grid, node_file)");
 
   e = error_of(R"({"mls": {"volumes": "voronoi"}})");
   EXPECT_EQ(e.field(), "/mls/volumes");
@@ -589,6 +589,34 @@ TEST(SceneFixed, UnknownFaceNamesItsIndex) {
 TEST(SceneFixed, OverrideFixedFaces) {
   EXPECT_EQ(parse("{}", {{"fixed", "[]"}}).fixed_faces, 0u);
   EXPECT_EQ(parse("{}", {{"fixed", R"(["bottom"])"}}).fixed_faces, face_bottom);
+}
+
+TEST(SceneGradedGrid, ParsesAndRejectsSpacingsThatDoNotFit) {
+  const Scene s = parse_scene(
+      R"({"model": "hex_fem", "body": {"distribution": {"type": "graded_grid", "per_edge": 21, "first_spacing": 0.02}}})",
+      "t.json", ".");
+  EXPECT_EQ(s.distribution.type, DistributionType::graded_grid);
+  EXPECT_DOUBLE_EQ(s.distribution.first_spacing, 0.02);
+  EXPECT_FALSE(s.distribution.focus_given);
+  try {
+    parse_scene(R"({"body": {"distribution": {"type": "graded_grid", "first_spacing": 1.5}}})", "t.json", ".");
+    FAIL();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/body/distribution/first_spacing");
+    EXPECT_NE(e.reason().find("does not fit"), std::string::npos) << e.reason();
+  }
+  try {
+    parse_scene(R"({"body": {"distribution": {"type": "graded_grid", "focus": [0, 0, 3]}}})", "t.json", ".");
+    FAIL();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/body/distribution/focus");
+  }
+  try {
+    parse_scene(R"({"body": {"distribution": {"type": "graded_grid", "first_spacing": -1}}})", "t.json", ".");
+    FAIL();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/body/distribution/first_spacing");
+  }
 }
 
 }  // namespace

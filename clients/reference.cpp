@@ -1,0 +1,125 @@
+// palpate-reference: the converged finite-block reference of a scene (core/reference.h):
+// the linear hex FEM on graded lattices refined level by level, solved exactly and
+// quasi-statically, with Richardson extrapolation of the indentation at each force.
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/hertz.h"
+#include "core/reference.h"
+#include "core/scene.h"
+
+using namespace palpate;
+
+namespace {
+
+const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
+  --scene FILE          scene file; its box, material, fixed faces and indenter are used
+  --forces F1,F2,...    forces in N (default: the scene's verify.forces, or the Hertz
+                        depths 0.01 ... 0.1 m)
+  --levels N1,N2,...    nodes per edge of the graded lattices, coarse to fine
+                        (default 17,25,33,41; at least three)
+  --first-spacing S     first spacing (m) of the 21-per-edge member of the family (default 0.025)
+  --set KEY=VALUE       override a scene field (repeatable)
+  --out FILE            write the reference as JSON (what palpate-verify --reference reads)
+  --json                print the reference as JSON on stdout
+  --quiet               no progress on stderr
+)";
+
+template <class T>
+std::vector<T> parse_list(const std::string& text, const char* what) {
+  std::vector<T> values;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    size_t used = 0;
+    const double v = std::stod(item, &used);
+    if (used != item.size() || !std::isfinite(v) || v <= 0)
+      throw std::invalid_argument(std::string(what) + ": '" + item + "' is not a positive number");
+    values.push_back(static_cast<T>(v));
+  }
+  if (values.empty()) throw std::invalid_argument(std::string(what) + ": empty list");
+  return values;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene_file, out_file;
+  SceneOverrides overrides;
+  std::vector<double> forces;
+  ReferenceOptions options;
+  bool json = false, quiet = false;
+  try {
+    for (int a = 1; a < argc; ++a) {
+      const std::string arg = argv[a];
+      auto value = [&]() -> std::string {
+        if (a + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
+        return argv[++a];
+      };
+      if (arg == "--scene") scene_file = value();
+      else if (arg == "--forces") forces = parse_list<double>(value(), "--forces");
+      else if (arg == "--levels") options.levels = parse_list<int>(value(), "--levels");
+      else if (arg == "--first-spacing") options.base_first_spacing = parse_list<double>(value(), "--first-spacing").at(0);
+      else if (arg == "--set") {
+        const std::string kv = value();
+        const auto eq = kv.find('=');
+        if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--set expects KEY=VALUE, got '" + kv + "'");
+        overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+      } else if (arg == "--out") out_file = value();
+      else if (arg == "--json") json = true;
+      else if (arg == "--quiet") quiet = true;
+      else if (arg == "--help" || arg == "-h") {
+        std::cout << kUsage;
+        return 0;
+      } else throw std::invalid_argument("unknown option " + arg);
+    }
+    if (scene_file.empty()) throw std::invalid_argument("--scene FILE is required");
+    if (options.levels.size() < 3) throw std::invalid_argument("--levels: at least three levels");
+    for (size_t k = 1; k < options.levels.size(); ++k)
+      if (options.levels[k] <= options.levels[k - 1]) throw std::invalid_argument("--levels must increase");
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-reference: " << e.what() << "\n\n" << kUsage;
+    return 2;
+  }
+
+  Reference ref;
+  try {
+    const Scene scene = load_scene(scene_file, overrides);
+    const double R = scene.indenter.radius;
+    const double E_star = hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio);
+    if (forces.empty()) forces = scene.verify.forces;
+    if (forces.empty())
+      for (int k = 1; k <= 10; ++k) forces.push_back(hertz::force(0.01 * k, scene.indenter.radius, E_star));
+    ref = finite_cube_reference(scene, forces, options, [&](const std::string& m) {
+      if (!quiet) std::fprintf(stderr, "palpate-reference: %s\n", m.c_str());
+    });
+    if (!out_file.empty()) {
+      std::ofstream out(out_file);
+      out << reference_to_json(ref) << "\n";
+      if (!out) throw std::runtime_error("cannot write " + out_file);
+    }
+    if (json) {
+      std::cout << reference_to_json(ref) << "\n";
+      return 0;
+    }
+    std::printf("\nFinite-block reference (linear hex FEM, graded lattices, Richardson): %s\n", ref.key.c_str());
+    std::printf("%10s", "F [N]");
+    for (const auto& l : ref.levels) std::printf(" %9d^3", l.per_edge);
+    std::printf(" %11s %10s %6s %10s\n", "d* [m]", "+- [m]", "p", "d_Hertz");
+    for (size_t f = 0; f < ref.forces.size(); ++f) {
+      std::printf("%10.3f", ref.forces[f]);
+      for (const auto& l : ref.levels) std::printf(" %11.6f", l.indentation[f]);
+      std::printf(" %11.6f %10.2e %6.2f %10.6f\n", ref.indentation[f], ref.uncertainty[f], ref.order[f],
+                  hertz::depth(ref.forces[f], R, E_star));
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-reference: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,300 @@
+#include "core/static_contact.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/CholmodSupport>
+#include <Eigen/SparseCore>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <spdlog/spdlog.h>
+#include <stdexcept>
+
+#include "core/contact.h"
+#include "core/indentation.h"
+#include "core/integrators.h"
+#include "core/solid.h"
+#include "core/step.h"
+
+namespace palpate {
+
+bool has_linear_static_solve(const Model& model) {
+  return model.solid == SolidKind::hex_fem && model.hex.formulation == HexFormulation::linear;
+}
+
+// ---------------------------------------------------------------------------
+// Linear FEM: exact active-set solve on the compliance of the contact candidates.
+
+struct LinearStaticContact::Impl {
+  using SparseMatrix = Eigen::SparseMatrix<double>;
+  const Model& model;
+  std::vector<int> free_dof;   // 3n: index among the free DOFs, -1 for a fixed particle
+  int free_count = 0;
+  Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> cholesky;
+
+  // Candidates: free top-face nodes under the sphere, with their undeformed gaps h at d = 0.
+  std::vector<int> candidate;  // particle index
+  std::vector<double> gap0;    // h_i, m
+  // Compliance columns C(:, k) restricted to the candidates' vertical DOFs; empty until needed.
+  std::vector<std::vector<double>> column;
+  int columns_computed = 0;
+  std::vector<int> active;     // candidate indices; kept between solves as a warm start
+
+  explicit Impl(const Model& m) : model(m) {
+    if (!has_linear_static_solve(m))
+      throw std::runtime_error("the exact quasi-static solve needs the linear hex_fem model");
+    const int n = m.particle_count;
+    free_dof.assign(3 * static_cast<size_t>(n), -1);
+    for (int i = 0; i < n; ++i)
+      if (!m.fixed[i])
+        for (int c = 0; c < 3; ++c) free_dof[3 * i + c] = free_count++;
+    assemble_and_factorize();
+    find_candidates();
+    column.resize(candidate.size());
+  }
+
+  void assemble_and_factorize() {
+    // Lower triangle of K over the free DOFs from the element matrices.
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(static_cast<size_t>(model.hex.element_count) * 300);
+    for (int e = 0; e < model.hex.element_count; ++e) {
+      const auto& nodes = model.hex.element_nodes[e];
+      const ElementMatrix& K = model.hex.element_stiffness[model.hex.element_type[e]];
+      for (int a = 0; a < 8; ++a)
+        for (int c = 0; c < 3; ++c) {
+          const int row = free_dof[3 * nodes[a] + c];
+          if (row < 0) continue;
+          for (int b = 0; b < 8; ++b)
+            for (int d = 0; d < 3; ++d) {
+              const int col = free_dof[3 * nodes[b] + d];
+              if (col >= 0 && row >= col) triplets.emplace_back(row, col, K(3 * a + c, 3 * b + d));
+            }
+        }
+    }
+    SparseMatrix K(free_count, free_count);
+    K.setFromTriplets(triplets.begin(), triplets.end());
+    triplets = {};
+    cholesky.compute(K);
+    if (cholesky.info() != Eigen::Success)
+      throw std::runtime_error("the stiffness matrix is singular: the fixed faces do not hold the body");
+  }
+
+  void find_candidates() {
+    const Points& X = model.rest_position;
+    const double top = X.row(2).maxCoeff();
+    const double R = model.indenter_radius;
+    const double tol = 1e-9 * std::max(1.0, std::abs(top));
+    for (int i = 0; i < model.particle_count; ++i) {
+      if (model.fixed[i] || X(2, i) < top - tol) continue;
+      const double dx = X(0, i) - model.indenter_start[0], dy = X(1, i) - model.indenter_start[1];
+      const double r2 = dx * dx + dy * dy;
+      if (r2 >= R * R) continue;
+      candidate.push_back(i);
+      // Sphere bottom at the node when the indenter touches the surface: touch_height - sqrt(R^2 - r^2).
+      gap0.push_back(model.touch_height - std::sqrt(R * R - r2) - X(2, i));
+    }
+    if (candidate.empty()) throw std::runtime_error("no free top-face node lies under the indenter");
+  }
+
+  // Solves K x = b for the unit vertical loads of the candidates in `need` (batched).
+  void compute_columns(const std::vector<int>& need) {
+    constexpr int kBatch = 64;
+    const int m = static_cast<int>(candidate.size());
+    for (size_t start = 0; start < need.size(); start += kBatch) {
+      const int b = static_cast<int>(std::min<size_t>(kBatch, need.size() - start));
+      Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(free_count, b);
+      for (int k = 0; k < b; ++k) rhs(free_dof[3 * candidate[need[start + k]] + 2], k) = 1.0;
+      const Eigen::MatrixXd x = cholesky.solve(rhs);
+      for (int k = 0; k < b; ++k) {
+        std::vector<double>& col = column[need[start + k]];
+        col.resize(m);
+        for (int j = 0; j < m; ++j) col[j] = x(free_dof[3 * candidate[j] + 2], k);
+        ++columns_computed;
+      }
+    }
+  }
+
+  StaticSolution solve(double force, State* state) {
+    StaticSolution out;
+    if (!(force >= 0.0) || !std::isfinite(force)) {
+      out.message = "the force must be finite and >= 0";
+      return out;
+    }
+    const int m = static_cast<int>(candidate.size());
+    if (active.empty()) active = {static_cast<int>(std::min_element(gap0.begin(), gap0.end()) - gap0.begin())};
+    std::vector<uint8_t> in_active(m, 0);
+    Eigen::VectorXd p;
+    double d = 0.0;
+    const double gap_tolerance = 1e-12 * model.indenter_radius;
+    const int max_iterations = 20 * m + 100;
+    for (int it = 0; it < max_iterations; ++it) {
+      out.iterations = it;
+      std::vector<int> need;
+      for (int a : active)
+        if (column[a].empty()) need.push_back(a);
+      compute_columns(need);
+      const int na = static_cast<int>(active.size());
+      // w_A = 0 and sum p = F: C_AA p = d 1 - h_A, so p = d y1 - yh with y1 = C_AA^-1 1,
+      // yh = C_AA^-1 h_A, and d = (F + 1.yh) / (1.y1).
+      Eigen::MatrixXd S(na, na);
+      Eigen::VectorXd h(na);
+      for (int a = 0; a < na; ++a) {
+        h[a] = gap0[active[a]];
+        for (int b = 0; b < na; ++b) S(a, b) = 0.5 * (column[active[b]][active[a]] + column[active[a]][active[b]]);
+      }
+      const Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
+      const Eigen::VectorXd y1 = ldlt.solve(Eigen::VectorXd::Ones(na));
+      const Eigen::VectorXd yh = ldlt.solve(h);
+      d = (force + yh.sum()) / y1.sum();
+      p = d * y1 - yh;
+      // A node pulling on the sphere leaves the active set (the most negative first).
+      Eigen::Index worst;
+      if (na > 1 && p.minCoeff(&worst) < -1e-12 * std::max(force, 1e-300)) {
+        active.erase(active.begin() + worst);
+        continue;
+      }
+      // Nodes penetrating the sphere join it.
+      std::fill(in_active.begin(), in_active.end(), 0);
+      for (int a : active) in_active[a] = 1;
+      std::vector<int> join;
+      out.max_penetration = 0.0;
+      for (int j = 0; j < m; ++j) {
+        if (in_active[j]) continue;
+        double w = gap0[j] - d;
+        for (int a = 0; a < na; ++a) w += column[active[a]][j] * p[a];
+        out.max_penetration = std::max(out.max_penetration, -w);
+        if (w < -gap_tolerance) join.push_back(j);
+      }
+      if (join.empty()) {
+        out.converged = true;
+        break;
+      }
+      active.insert(active.end(), join.begin(), join.end());
+    }
+    if (!out.converged) out.message = "the active set did not settle";
+    out.indentation = d;
+    out.contact_force = p.sum();
+    out.active_count = static_cast<int>(active.size());
+    if (state) write_state(force, d, p, *state);
+    return out;
+  }
+
+  void write_state(double force, double d, const Eigen::VectorXd& p, State& state) {
+    Eigen::VectorXd load = Eigen::VectorXd::Zero(free_count);
+    for (size_t a = 0; a < active.size(); ++a) load[free_dof[3 * candidate[active[a]] + 2]] = -p[a];
+    const Eigen::VectorXd u = cholesky.solve(load);
+    state.position = model.rest_position;
+    for (int i = 0; i < model.particle_count; ++i)
+      for (int c = 0; c < 3; ++c)
+        if (free_dof[3 * i + c] >= 0) state.position(c, i) += u[free_dof[3 * i + c]];
+    state.velocity.setZero();
+    state.indenter_center = Vec3(model.indenter_start[0], model.indenter_start[1], model.touch_height - d);
+    state.indenter_velocity = 0.0;
+    state.force_command = force;
+    state.contact_index.clear();
+    state.contact_multiplier.clear();
+    for (size_t a = 0; a < active.size(); ++a) {
+      state.contact_force.col(static_cast<Eigen::Index>(a)) = Vec3(0, 0, -p[a]);
+      state.contact_index.push_back(candidate[active[a]]);
+      state.contact_multiplier.push_back(p[a]);
+    }
+    state.indenter_contact_force = p.sum();
+  }
+};
+
+LinearStaticContact::LinearStaticContact(const Model& model) : impl_(std::make_unique<Impl>(model)) {}
+LinearStaticContact::~LinearStaticContact() = default;
+StaticSolution LinearStaticContact::solve(double force, State* state) { return impl_->solve(force, state); }
+int LinearStaticContact::free_dofs() const { return impl_->free_count; }
+int LinearStaticContact::candidate_count() const { return static_cast<int>(impl_->candidate.size()); }
+int LinearStaticContact::columns_computed() const { return impl_->columns_computed; }
+
+// ---------------------------------------------------------------------------
+// Nonlinear models: pseudo-transient continuation with the implicit Euler step.
+
+StaticSolution relax_to_rest(const Model& model, State& state, double force, double residual_tolerance,
+                             int max_steps) {
+  StaticSolution out;
+  if (!(force >= 0.0) || !std::isfinite(force)) {
+    out.message = "the force must be finite and >= 0";
+    return out;
+  }
+  // The continuation runs on a copy of the model whose integrator is implicit Euler
+  // without damping and whose indenter weighs as much as the body (the masses only
+  // regularise the steps; a light sphere's free motion would overshoot at large dt).
+  // A step whose residual grows is rejected and retried with half the step; an
+  // accepted one doubles it.
+  Model relax = model;
+  relax.scene.integrator.type = IntegratorType::implicit_euler;
+  relax.scene.integrator.damping = 0.0;
+  relax.indenter_mass = std::max(model.indenter_mass, std::accumulate(model.mass.begin(), model.mass.end(), 0.0));
+  State work = make_state(relax);  // the implicit integrator's workspace
+  work.position = state.position;
+  work.indenter_center = state.indenter_center;
+  work.contact_index = state.contact_index;
+  work.contact_multiplier = state.contact_multiplier;
+  work.contact_force = state.contact_force;
+  work.indenter_contact_force = state.indenter_contact_force;
+  work.force_command = force;
+  double& dt = relax.scene.integrator.dt;
+  const double dt_max = 1e4, dt_min = 1e-9;
+  Points f(3, model.particle_count);
+  auto residual_of = [&](const State& s) {  // free particles' net force and the indenter's imbalance, N
+    elastic_forces(relax, s.position, f);
+    add_contact_forces(s, f);
+    double r = 0.0;
+    for (int i = 0; i < model.particle_count; ++i)
+      if (!model.fixed[i]) r = std::max(r, f.col(i).norm());
+    return std::max(r, std::abs(s.indenter_contact_force - force));
+  };
+  double residual = residual_of(work);
+  const double target = residual_tolerance * std::max(force, 1e-300);
+  int rejected_in_a_row = 0;
+  for (int k = 0; k < max_steps && residual > target; ++k) {
+    const Points saved_position = work.position;
+    const Vec3 saved_indenter = work.indenter_center;
+    const std::vector<int> saved_index = work.contact_index;
+    const std::vector<double> saved_multiplier = work.contact_multiplier;
+    const double saved_contact = work.indenter_contact_force;
+    const Points saved_force = work.contact_force;
+    work.velocity.setZero();
+    work.indenter_velocity = 0.0;
+    const StepStatus status = step(relax, work);
+    out.iterations = k + 1;
+    const double next = status == StepStatus::non_finite ? INFINITY : residual_of(work);
+    spdlog::debug("relax_to_rest: step {} dt {:.3g} s residual {:.3e} N d {:.6f} m contact {:.4f} N ({} nodes)", k, dt,
+                  next, indentation(model, work), work.indenter_contact_force, work.contact_index.size());
+    if (!(next < residual)) {  // reject: restore and halve the step
+      work.position = saved_position;
+      work.indenter_center = saved_indenter;
+      work.contact_index = saved_index;
+      work.contact_multiplier = saved_multiplier;
+      work.contact_force = saved_force;
+      work.indenter_contact_force = saved_contact;
+      dt *= 0.5;
+      if (dt < dt_min || ++rejected_in_a_row > 6) break;  // stalled: the dynamic settle finishes
+      continue;
+    }
+    residual = next;
+    rejected_in_a_row = 0;
+    dt = std::min(dt_max, 2.0 * dt);
+  }
+  work.velocity.setZero();
+  work.indenter_velocity = 0.0;
+  work.work = std::move(state.work);  // the caller's own integrator's workspace
+  work.force_command = force;
+  state = std::move(work);
+  out.converged = residual <= target;
+  if (!out.converged) {
+    // Polish with the scene's own damped dynamics (the dynamic settle of palpate-verify).
+    const PressResult press = press_to_rest(model, state, force);
+    out.iterations += static_cast<int>(press.steps);
+    out.converged = press.at_rest;
+    if (!press.at_rest) out.message = "neither the continuation nor the dynamic settle reached rest";
+  }
+  out.indentation = indentation(model, state);
+  out.contact_force = state.indenter_contact_force;
+  out.active_count = static_cast<int>(state.contact_index.size());
+  return out;
+}
+
+}  // namespace palpate

@@ -1,0 +1,73 @@
+#pragma once
+// Quasi-static solve (physics.md §5): the rest state under a commanded indenter
+// force, found directly instead of by a dynamic settle.
+//
+// For the linear hexahedral FEM it is exact: the stiffness K over the free DOFs
+// is assembled and factorised once (sparse Cholesky, CHOLMOD), and the frictionless
+// contact of a rigid sphere, linearised as in Hertz theory (vertical gaps of the
+// top-face nodes under the sphere, small strain), is a Signorini problem on the
+// compliance C = K^-1 of those nodes:
+//   w = h - d + C p >= 0,  p >= 0,  p . w = 0,  sum p = F,
+// with h_i the undeformed gap of node i when the sphere touches the surface
+// (d = 0), d the indentation (physics.md §2) and p the nodal contact forces. It is
+// solved by an active-set method: for a fixed active set A the conditions w_A = 0
+// and sum p = F give d and p_A in closed form, nodes with p < 0 leave A, nodes with
+// w < 0 join it, until neither happens. Columns of C are computed only for nodes
+// that become active, so a sweep of forces reuses one factorisation.
+//
+// For the nonlinear models (MLS, corotational FEM) the rest state is found by
+// pseudo-transient continuation: linearly implicit Euler steps with the velocity
+// cleared after every step and a time step that grows as the residual falls (each
+// step is a Newton step regularised by M / dt^2, with the exact coupled contact
+// solve of the implicit integrator), until the contact force balances the command
+// and the free particles' residual force is below tolerance.
+#include <memory>
+#include <string>
+
+#include "core/model.h"
+#include "core/state.h"
+
+namespace palpate {
+
+struct StaticSolution {
+  bool converged = false;
+  double indentation = 0.0;     // d, m (physics.md §2)
+  double contact_force = 0.0;   // sum of the contact forces on the body, N
+  int active_count = 0;         // nodes in contact
+  int iterations = 0;           // active-set changes (linear) or continuation steps (nonlinear)
+  double max_penetration = 0.0; // largest violation of w >= 0 left, m
+  std::string message;          // why it did not converge
+};
+
+// Linear FEM: the factorised stiffness and the compliance columns computed so far.
+class LinearStaticContact {
+ public:
+  // Assembles and factorises K; throws std::runtime_error when the model is not the
+  // linear hex FEM or K is singular (too few fixed faces).
+  explicit LinearStaticContact(const Model& model);
+  ~LinearStaticContact();
+  LinearStaticContact(const LinearStaticContact&) = delete;
+  LinearStaticContact& operator=(const LinearStaticContact&) = delete;
+
+  // Rest state under `force` (N, pressing down). With `state`, also writes the
+  // positions, the indenter centre, the contact forces and zero velocities into it.
+  StaticSolution solve(double force, State* state = nullptr);
+
+  int free_dofs() const;
+  int candidate_count() const;   // top-face nodes under the sphere
+  int columns_computed() const;  // compliance columns (one sparse solve each)
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Nonlinear models (and any other): pseudo-transient continuation from the state
+// given. `residual_tolerance` is relative to the commanded force.
+StaticSolution relax_to_rest(const Model& model, State& state, double force, double residual_tolerance = 1e-6,
+                             int max_steps = 500);
+
+// Whether a model has the exact linear solve (the linear hex FEM).
+bool has_linear_static_solve(const Model& model);
+
+}  // namespace palpate
