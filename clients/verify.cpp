@@ -156,10 +156,13 @@ int main(int argc, char** argv) {
 
   if (!quiet)
     std::fprintf(stderr,
-                 "palpate-verify: %s, %d particles (%d fixed, %d regularised), sum of volumes %.4g m^3 "
-                 "(box %.4g), %s dt = %g s, damping %g 1/s\n",
-                 scene.name.c_str(), model.particle_count, model.fixed_count, model.regularized_count,
-                 model.total_volume, model.box_volume, to_string(scene.integrator.type), scene.integrator.dt,
+                 "palpate-verify: %s (%s), %d particles (%d fixed, %d regularised, worst cond(A) %.3g), spacing "
+                 "%.4g ... %.4g m, sum of volumes %.4g m^3 (box %.4g), integration residual %.2g (nodal %.2g), "
+                 "%s dt = %g s, damping %g 1/s\n",
+                 scene.name.c_str(), scene.model.c_str(), model.particle_count, model.fixed_count,
+                 model.regularized_count, model.worst_condition, model.min_spacing, model.max_spacing,
+                 model.total_volume, model.box_volume, model.integration_residual,
+                 model.integration_residual_nodal, to_string(scene.integrator.type), scene.integrator.dt,
                  scene.integrator.damping);
 
   // The finite-block reference (core/reference.h).
@@ -269,6 +272,12 @@ int main(int argc, char** argv) {
     out["particles"] = model.particle_count;
     out["fixed_particles"] = model.fixed_count;
     out["regularized_particles"] = model.regularized_count;
+    out["worst_moment_condition"] = model.worst_condition;
+    out["min_spacing"] = model.min_spacing;
+    out["max_spacing"] = model.max_spacing;
+    out["integration_residual"] = model.integration_residual;
+    out["integration_residual_nodal"] = model.integration_residual_nodal;
+    out["model"] = scene.model;
     out["total_volume"] = model.total_volume;
     out["box_volume"] = model.box_volume;
     out["integrator"] = to_string(scene.integrator.type);

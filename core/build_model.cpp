@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/boundary.h"
+#include "core/consistent_integration.h"
 #include "core/kernel.h"
 #include "core/model.h"
 #include "core/neighbors.h"
@@ -115,18 +116,44 @@ void build_mls(Model& m, const NodeCloud& cloud) {
     throw SceneError(scene.source, "/mls/neighbors",
                      "k = " + std::to_string(k) + " needs more particles than the cloud's " + std::to_string(n));
 
-  const Neighborhoods nb = k_nearest_neighbors(X, k);
+  // With mls.max_neighbors > k the support grows, one neighbour at a time, until the
+  // moment matrix is well conditioned (stretched lattices: the k nearest may be coplanar).
+  const int k_max = std::min(n - 1, std::max(k, scene.mls.max_neighbors));
+  const Neighborhoods nb = k_nearest_neighbors(X, k_max);
+  constexpr double kAdaptiveConditionLimit = 1e4;
 
-  // Support radius h_i = alpha * mean distance to the k neighbours (physics.md §1).
+  // Support radius h_i = alpha * (mean distance to the k_i neighbours | the k_i-th's distance)
+  // (physics.md §1).
   std::vector<double> mean_distance(n);
+  std::vector<int> support_count(n, k);
   m.support_radius.resize(n);
   m.min_spacing = INFINITY;
-  for (int i = 0; i < n; ++i) {
+  auto reach_of = [&](int i, int count, double& mean) {
     double sum = 0;
-    for (int a = nb.offset[i]; a < nb.offset[i + 1]; ++a) sum += std::sqrt(nb.dist2[a]);
-    mean_distance[i] = sum / k;
-    m.support_radius[i] = scene.mls.support_factor * mean_distance[i];
+    for (int a = nb.offset[i]; a < nb.offset[i] + count; ++a) sum += std::sqrt(nb.dist2[a]);
+    mean = sum / count;
+    return scene.mls.support_rule == SupportRule::kth_distance
+               ? std::sqrt(nb.dist2[nb.offset[i] + count - 1])  // nearest first
+               : mean;
+  };
+  auto condition_of = [&](int i, int count, double h) {
+    Mat3 A = Mat3::Zero();
+    for (int a = nb.offset[i]; a < nb.offset[i] + count; ++a) {
+      const Vec3 x_ij = X.col(nb.index[a]) - X.col(i);
+      A += kernel_weight(nb.dist2[a], h * h) * x_ij * x_ij.transpose();
+    }
+    const Vec3 ev = Eigen::SelfAdjointEigenSolver<Mat3>(A, Eigen::EigenvaluesOnly).eigenvalues();
+    return ev[0] > 0 ? ev[2] / ev[0] : INFINITY;
+  };
+  for (int i = 0; i < n; ++i) {
+    int count = k;
+    double reach = reach_of(i, count, mean_distance[i]);
+    while (count < k_max && condition_of(i, count, scene.mls.support_factor * reach) > kAdaptiveConditionLimit)
+      reach = reach_of(i, ++count, mean_distance[i]);
+    support_count[i] = count;
+    m.support_radius[i] = scene.mls.support_factor * reach;
     m.min_spacing = std::min(m.min_spacing, std::sqrt(nb.dist2[nb.offset[i]]));
+    m.max_spacing = std::max(m.max_spacing, std::sqrt(nb.dist2[nb.offset[i]]));
   }
 
   // Keep only neighbours inside the support (non-zero weight): the rest contribute nothing.
@@ -134,7 +161,7 @@ void build_mls(Model& m, const NodeCloud& cloud) {
   std::vector<double> weight;
   for (int i = 0; i < n; ++i) {
     const double h2 = m.support_radius[i] * m.support_radius[i];
-    for (int a = nb.offset[i]; a < nb.offset[i + 1]; ++a) {
+    for (int a = nb.offset[i]; a < nb.offset[i] + support_count[i]; ++a) {
       const double w = kernel_weight(nb.dist2[a], h2);
       if (w <= 0) continue;
       m.neighbor_index.push_back(nb.index[a]);
@@ -201,6 +228,20 @@ void build_mls(Model& m, const NodeCloud& cloud) {
     Eigen::Map<Mat3> correction(&m.rest_correction[9 * static_cast<size_t>(i)]);
     correction = Mat3::Identity() - B;
   }
+
+  // Integration constraint at interior particles (consistent_integration.h): measured
+  // always, imposed when the scene asks for it.
+  std::vector<uint8_t> interior = particles_on_faces(X, face_x_min | face_x_max | face_y_min | face_y_max |
+                                                            face_bottom | face_top);
+  for (auto& flag : interior) flag = !flag;
+  if (scene.mls.integration == IntegrationRule::consistent) {
+    const IntegrationCorrection c = make_integration_consistent(m, interior);
+    m.integration_residual_nodal = c.residual_before;
+    m.integration_residual = c.residual_after;
+    m.integration_correction = c.relative_change;
+  } else {
+    m.integration_residual_nodal = m.integration_residual = integration_residual(m, interior);
+  }
   build_force_blocks(m);
 
   // Hourglass control: kappa_i = c * 2 mu * v_i / tr(A_i), per neighbour kappa_i w_ij.
@@ -228,7 +269,10 @@ void build_hex_fem(Model& m, const NodeCloud& cloud) {
   for (int i = 0; i < m.particle_count; ++i) m.mass[i] = m.scene.material.density * m.volume[i];
   m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
   m.min_spacing = INFINITY;
-  for (const Vec3& size : m.hex.element_size) m.min_spacing = std::min(m.min_spacing, size.minCoeff());
+  for (const Vec3& size : m.hex.element_size) {
+    m.min_spacing = std::min(m.min_spacing, size.minCoeff());
+    m.max_spacing = std::max(m.max_spacing, size.maxCoeff());
+  }
 }
 
 // Fixed particles and the indenter's placement (both models).

@@ -78,8 +78,15 @@ struct Model {
   double worst_condition = 0.0;   // largest cond(A_i) before regularisation
   double total_volume = 0.0;      // sum v_i, m^3 (compare with box_volume)
   double box_volume = 0.0;        // m^3
-  double min_spacing = 0.0;       // smallest nearest-neighbour distance, m
+  double min_spacing = 0.0;       // smallest nearest-neighbour distance (FEM: element edge), m
+  double max_spacing = 0.0;       // largest nearest-neighbour distance (FEM: element edge), m
   double wave_speed = 0.0;        // p-wave speed sqrt((lambda + 2 mu) / rho), m/s
+  // Integration constraint sum_i v_i g_ij = 0 at interior particles (MLS only):
+  // max residual relative to the mean |v_i g_ij|, of the plain MLS weights and of
+  // the weights in use (equal unless mls.integration is "consistent").
+  double integration_residual_nodal = 0.0;
+  double integration_residual = 0.0;
+  double integration_correction = 0.0;  // ||delta|| / ||g|| of the consistent correction
 };
 
 // Builds the model a scene describes. Throws SceneError / std::runtime_error

@@ -53,6 +53,15 @@ constexpr Named<HexFormulation> kHexFormulations[] = {
     {"corotational", HexFormulation::corotational},
 };
 
+constexpr Named<SupportRule> kSupportRules[] = {
+    {"mean_distance", SupportRule::mean_distance},
+    {"kth_distance", SupportRule::kth_distance},
+};
+constexpr Named<IntegrationRule> kIntegrationRules[] = {
+    {"nodal", IntegrationRule::nodal},
+    {"consistent", IntegrationRule::consistent},
+};
+
 constexpr Named<DistributionType> kDistributions[] = {
     {"grid", DistributionType::grid},
     {"jittered_grid", DistributionType::jittered_grid},
@@ -397,9 +406,15 @@ void read_body(const Reader& r, const fs::path& base_dir, Scene& s) {
 }
 
 void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
-  r.object({"neighbors", "support_factor", "volumes", "hourglass", "regularization"});
+  r.object({"neighbors", "max_neighbors", "support_factor", "support_rule", "integration", "volumes", "hourglass", "regularization"});
   r["neighbors"].get(m.neighbors, 4, 64);
+  r["max_neighbors"].get(m.max_neighbors, 0, 128);
+  if (m.max_neighbors != 0 && m.max_neighbors < m.neighbors)
+    r["max_neighbors"].fail("must be 0 (off) or at least neighbors (" + std::to_string(m.neighbors) + "), got " +
+                            std::to_string(m.max_neighbors));
   r["support_factor"].get(m.support_factor, open_closed(0.0, 10.0));
+  r["support_rule"].get(m.support_rule, "support rule", kSupportRules);
+  r["integration"].get(m.integration, "integration rule", kIntegrationRules);
   r["volumes"].get(m.volumes, "volume rule", kVolumeRules);
   r["hourglass"].get(m.hourglass, closed(0.0, 100.0));
   r["regularization"].get(m.regularization, closed_open(0.0, 1.0));

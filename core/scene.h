@@ -30,6 +30,11 @@ class SceneError : public std::runtime_error {
 
 enum class DistributionType { grid, jittered_grid, graded_grid, node_file };
 enum class VolumeRule { kernel, lattice };  // kernel sums, or lattice cell volumes
+// Support radius h_i = alpha * (the mean distance to the k neighbours | the k-th neighbour's distance).
+enum class SupportRule { mean_distance, kth_distance };
+// Nodal integration of the MLS gradients as is, or corrected to satisfy the
+// integration constraint sum_i v_i g_ij = 0 at interior nodes (consistent_integration.h).
+enum class IntegrationRule { nodal, consistent };
 enum class IntegratorType { rk4, symplectic_euler, implicit_euler };
 
 // Faces of the body's box, as bits of Scene::fixed_faces.
@@ -63,7 +68,11 @@ struct DistributionSpec {
 
 struct MlsSpec {
   int neighbors = 16;            // k of the k-nearest-neighbour support (paper: 16)
-  double support_factor = 1.0;   // alpha: h_i = alpha * mean distance to the k neighbours
+  int max_neighbors = 0;         // > k: grow a particle's support up to this many neighbours until
+                                 // cond(A_i) <= 1e4 (stretched lattices); 0 = k for every particle
+  double support_factor = 1.0;   // alpha: h_i = alpha * mean distance to the k neighbours (or the k-th, support_rule)
+  SupportRule support_rule = SupportRule::mean_distance;
+  IntegrationRule integration = IntegrationRule::nodal;
   VolumeRule volumes = VolumeRule::kernel;
   double hourglass = 0.0;        // dimensionless hourglass-control stiffness (0 = off)
   double regularization = 1e-6;  // relative eigenvalue floor of the moment matrix

@@ -32,6 +32,14 @@ enum DistributionType {
   nodeFile @2 $Json.name("node_file");
   gradedGrid @3 $Json.name("graded_grid");   # geometric lattice graded toward a focus
 }
+enum SupportRule {
+  meanDistance @0 $Json.name("mean_distance");  # h = alpha * mean distance to the k neighbours
+  kthDistance @1 $Json.name("kth_distance");    # h = alpha * distance to the k-th neighbour
+}
+enum IntegrationRule {
+  nodal @0;       # MLS gradients as they are
+  consistent @1;  # corrected to satisfy the integration constraint (patch test on any cloud)
+}
 enum VolumeRule {
   kernel @0;   # (A-2, A-3) kernel sums
   lattice @1;  # lattice cell volumes
@@ -79,6 +87,9 @@ struct Mls {
   volumes @2 :VolumeRule = kernel;
   hourglass @3 :Float64 = 0;                                  # [0, 100], 0 = off
   regularization @4 :Float64 = 1e-6;                          # [0, 1)
+  supportRule @5 :SupportRule = meanDistance $Json.name("support_rule");
+  integration @6 :IntegrationRule = nodal;
+  maxNeighbors @7 :Int32 = 0 $Json.name("max_neighbors");    # [0, 128], 0 = k for every particle
 }
 struct HexFem {
   formulation @0 :HexFormulation = linear;
