@@ -1,6 +1,6 @@
 // palpate-bench-step: single-thread timings of the simulation's hot paths on a
 // scene with the indenter pressed into the body (contact active):
-//   one internal_forces call, one RK4 step, one symplectic-Euler step and one
+//   one internal-force evaluation, one RK4 step, one symplectic-Euler step and one
 //   linearly implicit Euler step (step() with the scene's other settings).
 // Every timed call starts from the same pressed state (restored, untimed, before
 // each repetition), so every repetition does the same work; the figures are the
@@ -20,6 +20,7 @@
 #include "core/mls_forces.h"
 #include "core/model.h"
 #include "core/scene.h"
+#include "core/solid.h"
 #include "core/state.h"
 #include "core/step.h"
 
@@ -129,7 +130,9 @@ int main(int argc, char** argv) {
   }
   const IntegratorSpec scene_integrator = model.scene.integrator;
   const int n = model.particle_count;
-  const int nnz = model.neighbor_offset.back();
+  const bool is_mls = model.solid == SolidKind::mls;
+  // Neighbour pairs of the MLS supports (the hex FEM has none: its particles are lattice nodes).
+  const int nnz = is_mls && !model.neighbor_offset.empty() ? model.neighbor_offset.back() : 0;
 
   // Press the indenter in with RK4 (the scene's dt and damping) until it touches.
   model.scene.integrator.type = IntegratorType::rk4;
@@ -177,13 +180,13 @@ int main(int argc, char** argv) {
   auto restore_se = [&] { restore(se, start); };
   auto restore_ie = [&] { restore(ie, start); };
   // The force evaluation is timed warm (after an untimed one), as in the stages of a step.
-  auto evaluate_forces = [&] { internal_forces(model, start.position, f); };
+  auto evaluate_forces = [&] { elastic_forces(model, start.position, f); };
   ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
   // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
-  std::vector<double> cached_F, cached_S;
-  linearize_forces(model, start.position, cached_F, cached_S);
+  Workspace linearized;
+  linearize_elastic(model, start.position, linearized);
   Points df(3, n);
-  auto apply_tangent = [&] { force_differential(model, cached_F, cached_S, start.velocity, df); };
+  auto apply_tangent = [&] { elastic_force_differential(model, linearized, start.velocity, df); };
   ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
   ops[rk4_step] = {restore_rk4, [&] { check(step(rk4_model, rk4)); }, repeats, {}};
   ops[rk4_free] = {restore_rk4, [&] { free_motion_rk4(rk4_model, rk4); }, repeats, {}};
@@ -206,7 +209,7 @@ int main(int argc, char** argv) {
       op.ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
     }
   auto med = [&](int k) { return median(ops[k].ms); };
-  const double flops = internal_forces_flops(model);
+  const double flops = is_mls ? internal_forces_flops(model) : 0.0;  // counted for the MLS solid only
   const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
                rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
                ie_ms = med(ie_step), ie_free_ms = med(ie_free);
@@ -225,6 +228,7 @@ int main(int argc, char** argv) {
   const double gflops = flops / (force_eval_ms * 1e6);
   nlohmann::json j;
   j["scene"] = model.scene.name;
+  j["model"] = is_mls ? "mls" : "hex_fem";
   j["particles"] = n;
   j["fixed_particles"] = model.fixed_count;
   j["neighbor_pairs"] = nnz;
