@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "clients/cli.h"
 #include "core/contact.h"
 #include "core/integrators.h"
 #include "core/mls_forces.h"
@@ -99,12 +100,8 @@ int main(int argc, char** argv) {
       };
       if (arg == "--scene") scene_file = value();
       else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
-      else if (arg == "--set") {
-        const std::string kv = value();
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--set expects KEY=VALUE, got '" + kv + "'");
-        overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-      } else if (arg == "--repeats") repeats = positive_int(arg, value());
+      else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
+      else if (arg == "--repeats") repeats = positive_int(arg, value());
       else if (arg == "--ie-repeats") ie_repeats = positive_int(arg, value());
       else if (arg == "--press-steps") press_steps = positive_int(arg, value());
       else if (arg == "--min-contacts") min_contacts = positive_int(arg, value());

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "clients/cli.h"
 #include "core/indentation.h"
 #include "core/mls_forces.h"
 #include "core/model.h"
@@ -101,12 +102,8 @@ int main(int argc, char** argv) {
         return argv[++a];
       };
       if (arg == "--scene") scene_file = value();
-      else if (arg == "--set") {
-        const std::string kv = value();
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--set expects KEY=VALUE, got '" + kv + "'");
-        overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-      } else if (arg == "--force") force = std::stod(value());
+      else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
+      else if (arg == "--force") force = std::stod(value());
       else if (arg == "--duration") duration = std::stod(value());
       else if (arg == "--tolerance") tolerance = std::stod(value());
       else if (arg == "--json") json = true;

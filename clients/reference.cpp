@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "clients/cli.h"
 #include "core/hertz.h"
 #include "core/reference.h"
 #include "core/scene.h"
@@ -30,22 +31,6 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
   --quiet               no progress on stderr
 )";
 
-template <class T>
-std::vector<T> parse_list(const std::string& text, const char* what) {
-  std::vector<T> values;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    size_t used = 0;
-    const double v = std::stod(item, &used);
-    if (used != item.size() || !std::isfinite(v) || v <= 0)
-      throw std::invalid_argument(std::string(what) + ": '" + item + "' is not a positive number");
-    values.push_back(static_cast<T>(v));
-  }
-  if (values.empty()) throw std::invalid_argument(std::string(what) + ": empty list");
-  return values;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -62,15 +47,11 @@ int main(int argc, char** argv) {
         return argv[++a];
       };
       if (arg == "--scene") scene_file = value();
-      else if (arg == "--forces") forces = parse_list<double>(value(), "--forces");
-      else if (arg == "--levels") options.levels = parse_list<int>(value(), "--levels");
-      else if (arg == "--first-spacing") options.base_first_spacing = parse_list<double>(value(), "--first-spacing").at(0);
-      else if (arg == "--set") {
-        const std::string kv = value();
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--set expects KEY=VALUE, got '" + kv + "'");
-        overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-      } else if (arg == "--out") out_file = value();
+      else if (arg == "--forces") forces = cli::positive_list(value(), "--forces");
+      else if (arg == "--levels") options.levels = cli::positive_list<int>(value(), "--levels");
+      else if (arg == "--first-spacing") options.base_first_spacing = cli::positive_list(value(), "--first-spacing").at(0);
+      else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
+      else if (arg == "--out") out_file = value();
       else if (arg == "--json") json = true;
       else if (arg == "--quiet") quiet = true;
       else if (arg == "--help" || arg == "-h") {

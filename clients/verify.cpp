@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "clients/cli.h"
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/model.h"
@@ -64,21 +65,6 @@ struct Row {
   std::string status = "ok";
 };
 
-std::vector<double> parse_list(const std::string& text) {
-  std::vector<double> values;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    size_t used = 0;
-    double v = std::stod(item, &used);
-    if (used != item.size() || !std::isfinite(v) || v <= 0)
-      throw std::invalid_argument("--forces: '" + item + "' is not a positive number");
-    values.push_back(v);
-  }
-  if (values.empty()) throw std::invalid_argument("--forces: empty list");
-  return values;
-}
-
 double l2_error(const std::vector<Row>& rows, double Row::*ref) {
   double num = 0, den = 0;
   for (const Row& r : rows) {
@@ -107,13 +93,9 @@ int main(int argc, char** argv) {
       };
       if (arg == "--scene") scene_file = value();
       else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
-      else if (arg == "--forces") forces = parse_list(value());
-      else if (arg == "--set") {
-        const std::string kv = value();
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--set expects KEY=VALUE, got '" + kv + "'");
-        overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-      } else if (arg == "--json") json = true;
+      else if (arg == "--forces") forces = cli::positive_list(value(), "--forces");
+      else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
+      else if (arg == "--json") json = true;
       else if (arg == "--csv") csv_file = value();
       else if (arg == "--quiet") quiet = true;
       else if (arg == "--trace") trace_interval = std::stod(value());
