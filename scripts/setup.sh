@@ -11,6 +11,7 @@ packages=(
   libsuitesparse-dev          # CHOLMOD: sparse Cholesky of the quasi-static FEM solve (the finite-cube reference)
   libopenblas0-serial         # optimised BLAS for CHOLMOD's supernodal factorisation (4x faster than the reference BLAS)
   python3-matplotlib python3-numpy   # plots in docs/ (glue only)
+  clang libclang-rt-14-dev    # fuzz/: libFuzzer (libclang_rt.fuzzer) for Debian's clang 14 (test.sh --sanitize)
 )
 missing=()
 for p in "${packages[@]}"; do

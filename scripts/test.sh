@@ -1,10 +1,46 @@
 #!/usr/bin/env bash
 # Set-up, build (Release with assertions kept), and the whole test suite through ctest.
+#
+#   scripts/test.sh [CTEST ARGS]   Release build in build/ (or $BUILD_DIR), the whole suite
+#   scripts/test.sh --sanitize     the robustness suite (docs/robustness.md), ~20-25 min on 2 cores:
+#     1. AddressSanitizer + UndefinedBehaviorSanitizer build of everything in build-asan/,
+#        the whole suite (UBSan stops at the first report, LeakSanitizer at exit);
+#     2. ThreadSanitizer build of the server and its e2e test in build-tsan/, that test;
+#     3. the libFuzzer targets (clang, fuzz/) in build-fuzz/, each run for
+#        $FUZZ_SECONDS (20) seconds from its seed corpus, and their regressions.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-BUILD_DIR=${BUILD_DIR:-build}
-cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=${BUILD_TYPE:-Release} >/dev/null
-cmake --build "$BUILD_DIR" -j"$(nproc)"
-cd "$BUILD_DIR"
-ctest --output-on-failure -j"$(nproc)" "$@"
+if [ "${1:-}" != "--sanitize" ]; then
+  BUILD_DIR=${BUILD_DIR:-build}
+  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=${BUILD_TYPE:-Release} >/dev/null
+  cmake --build "$BUILD_DIR" -j"$(nproc)"
+  cd "$BUILD_DIR"
+  ctest --output-on-failure -j"$(nproc)" "$@"
+  exit
+fi
+
+jobs=$(nproc)
+# -O1 -g1 (line tables), assertions on: half the compile time of RelWithDebInfo, file:line in reports.
+flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1")
+export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:check_initialization_order=1:strict_init_order=1
+export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+export TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1
+step() { echo "== test.sh --sanitize: $* ($(date +%T))"; }
+
+step "ASan + UBSan build (build-asan)"
+cmake -S . -B build-asan "${flags[@]}" -DPALPATE_SANITIZE=address,undefined >/dev/null
+cmake --build build-asan -j"$jobs"
+(cd build-asan && ctest --output-on-failure -j"$jobs")
+
+step "TSan build of the server and its e2e test (build-tsan)"
+cmake -S . -B build-tsan "${flags[@]}" -DPALPATE_SANITIZE=thread >/dev/null
+cmake --build build-tsan -j"$jobs" --target palpate-server server_e2e_test
+(cd build-tsan && ctest --output-on-failure -R '^server_e2e$')
+
+step "libFuzzer targets (build-fuzz, clang)"
+CC=clang CXX=clang++ cmake -S . -B build-fuzz "${flags[@]}" -DPALPATE_FUZZ=ON \
+  -DPALPATE_SANITIZE=address,undefined -DPALPATE_FUZZ_SECONDS="${FUZZ_SECONDS:-20}" >/dev/null
+cmake --build build-fuzz -j"$jobs"
+(cd build-fuzz && ctest --output-on-failure -j"$jobs" -L fuzz)
+step "done"

@@ -8,26 +8,14 @@
 // the loop and the other subscribers nothing.
 #include "server/session.h"
 
-#include <algorithm>
 #include <cmath>
-#include <system_error>
 
 #include <capnp/message.h>
 #include <spdlog/spdlog.h>
 
-#include "core/hertz.h"
-#include "protocol/scene_wire.h"
-
 namespace palpate::server {
 
 namespace {
-
-namespace fs = std::filesystem;
-
-// An RPC error whose description goes back to the caller as is.
-[[noreturn]] void fail(const std::string& message) {
-  throw kj::Exception(kj::Exception::Type::FAILED, __FILE__, __LINE__, kj::heapString(message.c_str()));
-}
 
 void fill_frame(wire::Frame::Builder f, const Snapshot& s, bool positions, bool contacts) {
   f.setTick(s.tick);
@@ -66,33 +54,6 @@ void fill_percentiles(wire::Percentiles::Builder b, const Histogram::Summary& s)
   b.setP50(s.p50);
   b.setP99(s.p99);
   b.setMax(s.max);
-}
-
-bool plain_scene_name(const std::string& name) {
-  if (name.empty() || name.size() > 200 || name[0] == '.') return false;
-  for (char c : name)
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) return false;
-  return true;
-}
-
-std::vector<std::string> scene_names(const fs::path& dir) {
-  std::vector<std::string> names;
-  std::error_code ec;
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
-    if (it->path().extension() == ".json") names.push_back(it->path().stem().string());
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
-// The largest |F| setForce accepts: 100 x the largest verification force, or
-// 100 x the Hertz force at 0.1 m depth when the scene has no sweep.
-double force_limit(const Scene& scene) {
-  double f = 0.0;
-  for (double v : scene.verify.forces) f = std::max(f, std::abs(v));
-  if (f == 0.0)
-    f = hertz::force(0.1, scene.indenter.radius,
-                     hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio));
-  return 100.0 * f;
 }
 
 }  // namespace
@@ -176,11 +137,7 @@ class SessionImpl final : public wire::Session::Server {
 
   kj::Promise<void> setForce(SetForceContext context) override {
     const double f = context.getParams().getNewtons();
-    const double limit = force_limit(sim_->model().scene);
-    if (!std::isfinite(f)) fail("setForce: newtons: must be a finite number, got " + std::to_string(f));
-    if (std::abs(f) > limit)
-      fail("setForce: newtons: |F| must be at most " + std::to_string(limit) + " N for this scene, got " +
-           std::to_string(f));
+    check_force(f, force_limit(sim_->model().scene));
     auto results = context.getResults();
     results.setSeq(sim_->enqueue(CommandType::set_force, f));
     results.setQueuedAtTick(sim_->newest_tick());
@@ -209,7 +166,7 @@ class SessionImpl final : public wire::Session::Server {
   kj::Promise<void> step(StepContext context) override {
     if (!sim_->config().headless) fail("step: only headless sessions are stepped by the client");
     const uint32_t n = context.getParams().getN();
-    if (n < 1 || n > 1000000) fail("step: n: must be in [1, 1000000], got " + std::to_string(n));
+    check_step_count(n);
     if (job_.get() != nullptr) fail("step: a step() is already running in this session; wait for it");
     const auto fields = context.getParams().getFields();
     const bool positions = fields.getPositions(), contacts = fields.getContacts();
@@ -412,8 +369,7 @@ kj::Promise<void> SessionImpl::subscribe(SubscribeContext context) {
   auto params = context.getParams();
   auto options = params.getOptions();
   const double rate = options.getRateHz();
-  if (!std::isfinite(rate) || rate < 0.0 || rate > 100000.0)
-    fail("subscribe: options.rateHz: must be in [0, 100000] (0 = every tick), got " + std::to_string(rate));
+  check_subscriber_rate(rate);
   if (subscribers_.size() >= 64) fail("subscribe: this session already has 64 subscribers");
   Subscriber sub{ctx_.next_subscriber_id++, params.getSink(), rate,
                  rate > 0.0 ? static_cast<int64_t>(1e9 / rate) : 0, options.getFields().getPositions(),
@@ -457,62 +413,9 @@ kj::Promise<void> ServerImpl::attach(AttachContext context) {
 }
 
 kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
-  auto request = context.getParams().getRequest();
-  SimConfig config;
-  config.headless = request.getHeadless();
-  config.spin_margin_us = ctx_.options.spin_margin_us;
-  config.try_realtime = ctx_.options.try_realtime;
-  config.checkpoint_interval = ctx_.options.checkpoint_interval;
-  const double rate = request.getRateHz();
-  if (!(rate == 0.0 || (rate > 0.0 && rate <= 10000.0)))
-    fail("openSession: request.rateHz: must be in (0, 10000] (0 = the server's rate), got " + std::to_string(rate));
-  config.rate_hz = rate == 0.0 ? ctx_.options.rate_hz : rate;
   if (static_cast<int>(ctx_.sessions.size()) >= ctx_.options.max_sessions)
     fail("openSession: the server already runs " + std::to_string(ctx_.sessions.size()) + " sessions (the limit)");
-
-  try {
-    SceneOverrides overrides;
-    for (auto o : request.getOverrides()) overrides.push_back(split_override(o.cStr(), "<rpc overrides>"));
-    auto scene = request.getScene();
-    switch (scene.which()) {
-      case wire::OpenRequest::Scene::SERVER_DEFAULT:
-        config.scene = load_scene(ctx_.options.default_scene, overrides);
-        break;
-      case wire::OpenRequest::Scene::NAME: {
-        const std::string name = scene.getName().cStr();
-        if (!plain_scene_name(name))
-          fail("openSession: request.scene.name: '" + name +
-               "' is not a plain scene name (letters, digits, '_', '-', '.'; no path)");
-        const fs::path file = ctx_.options.scene_dir / (name + ".json");
-        std::error_code ec;
-        if (!fs::is_regular_file(file, ec)) {
-          std::string known;
-          for (const auto& n : scene_names(ctx_.options.scene_dir)) known += (known.empty() ? "" : ", ") + n;
-          fail("openSession: request.scene.name: unknown scene '" + name + "' (known: " + known + ")");
-        }
-        config.scene = load_scene(file, overrides);
-        break;
-      }
-      case wire::OpenRequest::Scene::INLINE_SCENE:
-        config.scene = scene_from_wire(scene.getInlineScene(), "<rpc scene>", ctx_.options.scene_dir, overrides);
-        break;
-    }
-  } catch (const SceneError& e) {
-    fail(e.what());
-  }
-
-  // Bounded memory: refuse lattices beyond the server's particle limit before building.
-  if (const auto& d = config.scene.distribution; d.type != DistributionType::node_file) {
-    double count = 1.0;
-    for (int a = 0; a < 3; ++a) {
-      const double edge = config.scene.box.max[a] - config.scene.box.min[a];
-      count *= d.spacing > 0.0 ? std::round(edge / d.spacing) + 1.0 : d.per_edge;
-    }
-    if (count > ctx_.options.max_particles)
-      fail(config.scene.source + ": /body/distribution: " + std::to_string(static_cast<long long>(count)) +
-           " particles exceed this server's limit of " + std::to_string(ctx_.options.max_particles) +
-           " (palpate-server --max-particles)");
-  }
+  SimConfig config = session_config(context.getParams().getRequest(), ctx_.options);
 
   auto impl = kj::heap<SessionImpl>(ctx_, std::move(config));
   SessionImpl& session = *impl;

@@ -12,20 +12,10 @@
 #include <kj/async-io.h>
 
 #include "protocol/palpate.capnp.h"
+#include "server/requests.h"
 #include "server/sim_loop.h"
 
 namespace palpate::server {
-
-struct ServerOptions {
-  std::filesystem::path scene_dir;      // name-based opens: <scene_dir>/<name>.json
-  std::filesystem::path default_scene;  // opens without a scene
-  double rate_hz = 1000.0;
-  double spin_margin_us = 200.0;
-  bool try_realtime = true;
-  int checkpoint_interval = 100;
-  int max_sessions = 16;                // concurrent sessions (each owns a thread and a model)
-  double max_particles = 200000;        // lattice size refused beyond this (memory bound per session)
-};
 
 class SessionImpl;
 

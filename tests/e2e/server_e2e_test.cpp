@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -31,6 +32,19 @@
 
 namespace {
 
+// Wall-clock thresholds. Sanitized builds (scripts/test.sh --sanitize) step
+// several times slower and keep freed memory in quarantine: there the rates only
+// have to show a live loop, and leaks are LeakSanitizer's job, not the RSS check's.
+#ifdef PALPATE_SANITIZED
+constexpr double kMinRateHz = 200.0;          // real-time loop at 1 kHz, measured rate
+constexpr size_t kMinFullRateFrames = 250;    // frames of a full-rate subscriber over 1.5 s
+constexpr long kMaxRssGrowthKb = 1L << 30;    // not checked
+#else
+constexpr double kMinRateHz = 950.0;
+constexpr size_t kMinFullRateFrames = 1200;
+constexpr long kMaxRssGrowthKb = 4096;
+#endif
+
 using palpate::wire::FrameSink;
 using palpate::wire::PalpateServer;
 using palpate::wire::Session;
@@ -45,6 +59,7 @@ class ServerProcess {
     if (pipe(out) != 0) std::abort();
     pid_ = fork();
     if (pid_ == 0) {
+      prctl(PR_SET_PDEATHSIG, SIGKILL);  // no orphan server when the test aborts (e.g. a sanitizer report)
       dup2(out[1], STDOUT_FILENO);
       close(out[0]);
       close(out[1]);
@@ -218,7 +233,8 @@ TEST(ServerE2E, VersionAndSessionStreams) {
   auto sink_owner = kj::heap<RecordingSink>();
   RecordingSink& sink = *sink_owner;
   auto sub = session.subscribeRequest();
-  sub.setSink(kj::mv(sink_owner));
+  FrameSink::Client sink_cap = kj::mv(sink_owner);  // held here: the sink outlives the server's reference
+  sub.setSink(sink_cap);
   sub.getOptions().setRateHz(100);
   sub.getOptions().getFields().setPositions(true);
   auto handle = sub.send().wait(c.ws()).getSubscription();
@@ -246,7 +262,8 @@ TEST(ServerE2E, ForceCommandReachesTheStreamWithinTwoTicks) {
   auto sink_owner = kj::heap<RecordingSink>();
   RecordingSink& sink = *sink_owner;
   auto sub = session.subscribeRequest();
-  sub.setSink(kj::mv(sink_owner));
+  FrameSink::Client sink_cap = kj::mv(sink_owner);  // held here: the sink outlives the server's reference
+  sub.setSink(sink_cap);
   sub.getOptions().setRateHz(0);  // every tick
   auto handle = sub.send().wait(c.ws()).getSubscription();
   c.pump(200);
@@ -484,7 +501,8 @@ TEST(ServerE2E, BlowUpIsDetectedRecoveredAndNeverStreamed) {
     auto sink_owner = kj::heap<RecordingSink>();
     RecordingSink& sink = *sink_owner;
     auto sub = session.subscribeRequest();
-    sub.setSink(kj::mv(sink_owner));
+    FrameSink::Client sink_cap = kj::mv(sink_owner);  // held here: the sink outlives the server's reference
+    sub.setSink(sink_cap);
     sub.getOptions().setRateHz(0);
     sub.getOptions().getFields().setPositions(true);
     sub.getOptions().getFields().setContacts(true);
@@ -499,7 +517,7 @@ TEST(ServerE2E, BlowUpIsDetectedRecoveredAndNeverStreamed) {
     EXPECT_EQ(status.getState(), palpate::wire::RunState::RUNNING);
     ASSERT_GT(sink.frames.size(), 100u);
     for (const auto& f : sink.frames) ASSERT_TRUE(f.finite) << "non-finite frame at tick " << f.tick;
-    EXPECT_GT(achieved_rate(c, session), 900.0);
+    EXPECT_GT(achieved_rate(c, session), kMinRateHz - 50.0);
   }
 }
 
@@ -535,7 +553,8 @@ TEST(ServerE2E, StalledAndVanishingClientsCostOthersNothing) {
   auto sink_owner = kj::heap<RecordingSink>();
   RecordingSink& sink = *sink_owner;
   auto sub = session.subscribeRequest();
-  sub.setSink(kj::mv(sink_owner));
+  FrameSink::Client sink_cap = kj::mv(sink_owner);  // held here: the sink outlives the server's reference
+  sub.setSink(sink_cap);
   sub.getOptions().setRateHz(0);
   auto handle = sub.send().wait(c.ws()).getSubscription();
 
@@ -559,8 +578,8 @@ TEST(ServerE2E, StalledAndVanishingClientsCostOthersNothing) {
   }
   cv.notify_all();
   stalled.join();
-  EXPECT_GT(rate, 950.0);
-  EXPECT_GT(sink.frames.size(), 1200u) << "the full-rate subscriber lost frames to a stalled neighbour";
+  EXPECT_GT(rate, kMinRateHz);
+  EXPECT_GT(sink.frames.size(), kMinFullRateFrames) << "the full-rate subscriber lost frames to a stalled neighbour";
   EXPECT_TRUE(g_server->alive());
 }
 
@@ -606,7 +625,7 @@ TEST(ServerE2E, GarbageBytesAndConnectionChurn) {
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   const long rss_after = g_server->rss_kb();
   std::printf("server RSS %ld kB -> %ld kB over 100 cycles\n", rss_before, rss_after);
-  EXPECT_LT(rss_after - rss_before, 4096) << "RSS grew by " << (rss_after - rss_before) << " kB";
+  EXPECT_LT(rss_after - rss_before, kMaxRssGrowthKb) << "RSS grew by " << (rss_after - rss_before) << " kB";
   Client c;
   auto list_response = c.server.listScenesRequest().send().wait(c.ws());
   auto list = list_response.getNames();

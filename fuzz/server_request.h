@@ -1,0 +1,19 @@
+#pragma once
+// Shared by the server request fuzzer and its seed generator: the input format.
+//
+//   byte 0       which request the rest carries (Kind)
+//   bytes 1...   one Cap'n Proto message in the standard flat framing
+//                (segment table + segments, capnp::messageToFlatArray)
+#include <cstdint>
+
+namespace palpate::fuzz {
+
+enum Kind : uint8_t {
+  open_request = 0,  // wire::OpenRequest -> PalpateServer.openSession
+  set_force = 1,     // wire::Session::SetForceParams -> Session.setForce
+  step = 2,          // wire::Session::StepParams -> Session.step
+  subscribe = 3,     // wire::Session::SubscribeParams -> Session.subscribe
+  kind_count = 4,
+};
+
+}  // namespace palpate::fuzz

@@ -1,0 +1,154 @@
+#include "server/requests.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <system_error>
+#include <vector>
+
+#include <kj/exception.h>
+
+#include "core/hertz.h"
+#include "protocol/scene_wire.h"
+
+namespace palpate::server {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+bool plain_scene_name(const std::string& name) {
+  if (name.empty() || name.size() > 200 || name[0] == '.') return false;
+  for (char c : name)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) return false;
+  return true;
+}
+
+// True if `file` (absolute, symlinks resolved) lies below the folder `dir`.
+bool inside(const fs::path& file, const fs::path& dir) {
+  std::error_code ec;
+  const fs::path root = fs::weakly_canonical(dir, ec);
+  if (ec || root.empty()) return false;
+  const auto [r, f] = std::mismatch(root.begin(), root.end(), file.begin(), file.end());
+  return r == root.end() && f != file.end();
+}
+
+// A client-named node file is read by the simulation thread: only a bounded
+// regular file inside the server's scene folders (not /dev/zero, a FIFO, or any
+// file whose first line the error message would echo).
+void check_node_file(const Scene& scene, const ServerOptions& options) {
+  const fs::path& file = scene.distribution.node_file;
+  const std::string where = scene.source + ": /body/distribution/node_file: ";
+  std::error_code ec, ec_dir;
+  const fs::path real = fs::weakly_canonical(file, ec);
+  const fs::path default_dir = fs::absolute(options.default_scene, ec_dir).parent_path();
+  if (ec || !(inside(real, options.scene_dir) || (!ec_dir && inside(real, default_dir))))
+    fail(where + "'" + file.string() + "' is outside the server's scene folder");
+  if (!fs::is_regular_file(real, ec)) fail(where + "'" + file.string() + "' is not a regular file");
+  const std::uintmax_t bytes = fs::file_size(real, ec);
+  if (ec || bytes > kMaxNodeFileBytes)
+    fail(where + "'" + file.string() + "' is larger than " + std::to_string(kMaxNodeFileBytes >> 20) + " MiB");
+}
+
+}  // namespace
+
+void fail(const std::string& message) {
+  throw kj::Exception(kj::Exception::Type::FAILED, __FILE__, __LINE__, kj::heapString(message.c_str()));
+}
+
+std::vector<std::string> scene_names(const fs::path& dir) {
+  std::vector<std::string> names;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().extension() == ".json") names.push_back(it->path().stem().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+double force_limit(const Scene& scene) {
+  double f = 0.0;
+  for (double v : scene.verify.forces) f = std::max(f, std::abs(v));
+  if (f == 0.0)
+    f = hertz::force(0.1, scene.indenter.radius,
+                     hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio));
+  return 100.0 * f;
+}
+
+void check_force(double newtons, double limit) {
+  if (!std::isfinite(newtons)) fail("setForce: newtons: must be a finite number, got " + std::to_string(newtons));
+  if (std::abs(newtons) > limit)
+    fail("setForce: newtons: |F| must be at most " + std::to_string(limit) + " N for this scene, got " +
+         std::to_string(newtons));
+}
+
+void check_step_count(uint32_t n) {
+  if (n < 1 || n > 1000000) fail("step: n: must be in [1, 1000000], got " + std::to_string(n));
+}
+
+void check_subscriber_rate(double rate_hz) {
+  if (!std::isfinite(rate_hz) || rate_hz < 0.0 || rate_hz > 100000.0)
+    fail("subscribe: options.rateHz: must be in [0, 100000] (0 = every tick), got " + std::to_string(rate_hz));
+}
+
+SimConfig session_config(wire::OpenRequest::Reader request, const ServerOptions& options) {
+  SimConfig config;
+  config.headless = request.getHeadless();
+  config.spin_margin_us = options.spin_margin_us;
+  config.try_realtime = options.try_realtime;
+  config.checkpoint_interval = options.checkpoint_interval;
+  const double rate = request.getRateHz();
+  if (!(rate == 0.0 || (rate > 0.0 && rate <= 10000.0)))
+    fail("openSession: request.rateHz: must be in (0, 10000] (0 = the server's rate), got " + std::to_string(rate));
+  config.rate_hz = rate == 0.0 ? options.rate_hz : rate;
+
+  try {
+    SceneOverrides overrides;
+    for (auto o : request.getOverrides()) overrides.push_back(split_override(o.cStr(), "<rpc overrides>"));
+    auto scene = request.getScene();
+    switch (scene.which()) {
+      case wire::OpenRequest::Scene::SERVER_DEFAULT:
+        config.scene = load_scene(options.default_scene, overrides);
+        break;
+      case wire::OpenRequest::Scene::NAME: {
+        const std::string name = scene.getName().cStr();
+        if (!plain_scene_name(name))
+          fail("openSession: request.scene.name: '" + name +
+               "' is not a plain scene name (letters, digits, '_', '-', '.'; no path)");
+        const fs::path file = options.scene_dir / (name + ".json");
+        std::error_code ec;
+        if (!fs::is_regular_file(file, ec)) {
+          std::string known;
+          for (const auto& n : scene_names(options.scene_dir)) known += (known.empty() ? "" : ", ") + n;
+          fail("openSession: request.scene.name: unknown scene '" + name + "' (known: " + known + ")");
+        }
+        config.scene = load_scene(file, overrides);
+        break;
+      }
+      case wire::OpenRequest::Scene::INLINE_SCENE:
+        config.scene = scene_from_wire(scene.getInlineScene(), "<rpc scene>", options.scene_dir, overrides);
+        break;
+      default:  // a union member from a newer schema
+        fail("openSession: request.scene: unknown kind of scene");
+    }
+  } catch (const SceneError& e) {
+    fail(e.what());
+  }
+
+  // Bounded memory: refuse lattices beyond the server's particle limit before building.
+  if (const auto& d = config.scene.distribution; d.type != DistributionType::node_file) {
+    double count = 1.0;
+    for (int a = 0; a < 3; ++a) {
+      const double edge = config.scene.box.max[a] - config.scene.box.min[a];
+      count *= d.spacing > 0.0 ? std::round(edge / d.spacing) + 1.0 : d.per_edge;
+    }
+    if (count > options.max_particles)
+      fail(config.scene.source + ": /body/distribution: " + std::to_string(static_cast<long long>(count)) +
+           " particles exceed this server's limit of " + std::to_string(options.max_particles) +
+           " (palpate-server --max-particles)");
+  } else {
+    check_node_file(config.scene, options);
+  }
+  return config;
+}
+
+}  // namespace palpate::server
