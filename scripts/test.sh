@@ -36,7 +36,10 @@ cmake --build build-asan -j"$jobs"
 step "TSan build of the server and its e2e test (build-tsan)"
 cmake -S . -B build-tsan "${flags[@]}" -DPALPATE_SANITIZE=thread >/dev/null
 cmake --build build-tsan -j"$jobs" --target palpate-server server_e2e_test
-(cd build-tsan && ctest --output-on-failure -R '^server_e2e$')
+# The stalled-client test paces a 1 kHz session against wall-clock limits that a
+# ThreadSanitizer build (5-15x slower) cannot meet; it runs in the other two builds.
+(cd build-tsan && GTEST_FILTER='-ServerE2E.StalledAndVanishingClientsCostOthersNothing' \
+  ctest --output-on-failure -R '^server_e2e$')
 
 step "libFuzzer targets (build-fuzz, clang)"
 CC=clang CXX=clang++ cmake -S . -B build-fuzz "${flags[@]}" -DPALPATE_FUZZ=ON \
