@@ -162,11 +162,7 @@ int main(int argc, char** argv) {
         if (!quiet) std::fprintf(stderr, "palpate-verify: %s\n", m.c_str());
       });
     } else if (reference_choice != "none") {
-      std::ifstream in(reference_choice);
-      if (!in) throw std::runtime_error("--reference: cannot read " + reference_choice);
-      std::stringstream text;
-      text << in.rdbuf();
-      reference = reference_from_json(text.str());
+      reference = load_reference(reference_choice);
       if (reference->key != reference_key(scene))
         throw std::runtime_error("--reference: " + reference_choice + " is for '" + reference->key +
                                  "', the scene is '" + reference_key(scene) + "'");

@@ -31,19 +31,6 @@ std::vector<double> uniform_axis(double lo, double hi, int count) {
   return coord;
 }
 
-// Ratio r > 0 of the geometric series s (1 + r + ... + r^(n-1)) = length (bisection on log r).
-double geometric_ratio(double first, double length, int intervals) {
-  auto sum = [&](double r) {
-    return std::abs(r - 1.0) < 1e-12 ? first * intervals : first * (std::pow(r, intervals) - 1.0) / (r - 1.0);
-  };
-  double lo = std::log(1e-3), hi = std::log(1e3);
-  for (int it = 0; it < 200; ++it) {
-    const double mid = 0.5 * (lo + hi);
-    (sum(std::exp(mid)) < length ? lo : hi) = mid;
-  }
-  return std::exp(0.5 * (lo + hi));
-}
-
 // Node lattice built from three axis coordinate lists; volumes from the axis shares.
 NodeCloud tensor_lattice(const std::vector<double> (&coord)[3]) {
   std::vector<double> share[3];
@@ -73,6 +60,18 @@ Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing) {
   Eigen::Vector3i n;
   for (int c = 0; c < 3; ++c) n[c] = static_cast<int>(std::lround((box.max[c] - box.min[c]) / spacing)) + 1;
   return n;
+}
+
+double geometric_ratio(double first, double length, int intervals) {
+  auto sum = [&](double r) {
+    return std::abs(r - 1.0) < 1e-12 ? first * intervals : first * (std::pow(r, intervals) - 1.0) / (r - 1.0);
+  };
+  double lo = std::log(1e-3), hi = std::log(1e3);
+  for (int it = 0; it < 200; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (sum(std::exp(mid)) < length ? lo : hi) = mid;
+  }
+  return std::exp(0.5 * (lo + hi));
 }
 
 NodeCloud grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis) {

@@ -23,6 +23,8 @@ Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing);
 // most jitter * spacing per component; nodes on a face stay on it.
 NodeCloud jittered_grid_nodes(const BoxSpec& box, const Eigen::Vector3i& per_axis, double jitter,
                               uint64_t seed);
+// The ratio r > 0 of the geometric series first (1 + r + ... + r^(intervals-1)) = length.
+double geometric_ratio(double first, double length, int intervals);
 // Coordinates of `count` nodes on [lo, hi] graded geometrically away from `focus`:
 // the two intervals next to the focus (one if it lies on an end) are `first_spacing`
 // long, the following ones grow by a constant ratio per side. Throws

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "core/model.h"
+#include "core/node_cloud.h"
 #include "core/static_contact.h"
 
 namespace palpate {
@@ -18,16 +19,7 @@ namespace {
 // of the base level: r^n = r0^n0 (a one-sided grading over the height L).
 double family_first_spacing(double L, int base_per_edge, double base_first_spacing, int per_edge) {
   const int n0 = base_per_edge - 1, n = per_edge - 1;
-  // r0 from s0 (1 + r0 + ... + r0^(n0-1)) = L, by bisection on log r0.
-  auto sum = [](double s, double r, int k) {
-    return std::abs(r - 1.0) < 1e-12 ? s * k : s * (std::pow(r, k) - 1.0) / (r - 1.0);
-  };
-  double lo = std::log(1e-3), hi = std::log(1e3);
-  for (int it = 0; it < 200; ++it) {
-    const double mid = 0.5 * (lo + hi);
-    (sum(base_first_spacing, std::exp(mid), n0) < L ? lo : hi) = mid;
-  }
-  const double beta = n0 * 0.5 * (lo + hi);  // n0 log r0
+  const double beta = n0 * std::log(geometric_ratio(base_first_spacing, L, n0));  // n0 log r0
   const double r = std::exp(beta / n);
   return std::abs(r - 1.0) < 1e-12 ? L / n : L * (r - 1.0) / (std::pow(r, n) - 1.0);
 }
@@ -168,17 +160,22 @@ double reference_indentation(const Reference& ref, double force) {
   return NAN;
 }
 
+Reference load_reference(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  if (!in) throw std::runtime_error("cannot read " + file.string());
+  std::stringstream text;
+  text << in.rdbuf();
+  return reference_from_json(text.str());
+}
+
 std::optional<Reference> find_reference(const Scene& scene, const std::filesystem::path& folder) {
   std::error_code ec;
   if (!std::filesystem::is_directory(folder, ec)) return std::nullopt;
   const std::string key = reference_key(scene);
   for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
     if (entry.path().extension() != ".json") continue;
-    std::ifstream in(entry.path());
-    std::stringstream text;
-    text << in.rdbuf();
     try {
-      Reference ref = reference_from_json(text.str());
+      Reference ref = load_reference(entry.path());
       if (ref.key == key) return ref;
     } catch (const std::runtime_error&) {
       continue;  // not a reference file

@@ -67,6 +67,9 @@ double reference_indentation(const Reference& reference, double force);
 // monotonically.
 bool richardson(const double h[3], const double d[3], double& extrapolated, double& order);
 
+// A reference file written by palpate-reference --out (throws std::runtime_error).
+Reference load_reference(const std::filesystem::path& file);
+
 // The stored reference in `folder` (*.json written by palpate-reference --out) whose
 // key matches the scene's; nullopt when there is none.
 std::optional<Reference> find_reference(const Scene& scene, const std::filesystem::path& folder);
