@@ -17,6 +17,7 @@
 
 #include "clients/cli.h"
 #include "core/contact.h"
+#include "core/health.h"
 #include "core/integrators.h"
 #include "core/mls_forces.h"
 #include "core/model.h"
@@ -171,7 +172,7 @@ int main(int argc, char** argv) {
     int repeats;
     std::vector<double> ms;
   };
-  enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_free, op_count };
+  enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_free, health, op_count };
   std::vector<Op> ops(op_count);
   auto restore_rk4 = [&] { restore(rk4, start); };
   auto restore_se = [&] { restore(se, start); };
@@ -195,6 +196,9 @@ int main(int argc, char** argv) {
   // solve per contact candidate for the coupled contact response.
   ops[ie_step] = {restore_ie, [&] { check(step(ie_model, ie)); }, ie_repeats, {}};
   ops[ie_free] = {restore_ie, [&] { free_motion_implicit_euler(ie_model, ie); }, ie_repeats, {}};
+  // The per-step health checks alone (core/health.h; part of every step above).
+  ops[health] = {[&] { restore(se, start); free_motion_symplectic_euler(se_model, se); check(solve_contact(se_model, se)); },
+                 [&] { (void)check_health(se_model, se, StepStatus::ok); }, repeats, {}};
   for (Op& op : ops) op.ms.reserve(op.repeats);
   for (int r = 0; r < std::max(repeats, ie_repeats); ++r)
     for (Op& op : ops) {
@@ -209,7 +213,7 @@ int main(int argc, char** argv) {
   const double flops = is_mls ? internal_forces_flops(model) : 0.0;  // counted for the MLS solid only
   const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
                rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
-               ie_ms = med(ie_step), ie_free_ms = med(ie_free);
+               ie_ms = med(ie_step), ie_free_ms = med(ie_free), health_ms = med(health);
 
   // What the last timed steps did (every repetition does the same).
   restore(rk4, start);
@@ -264,6 +268,9 @@ int main(int argc, char** argv) {
       {"free_motion_ms", ie_free_ms},
       {"contact_and_other_ms", ie_ms - ie_free_ms},
   };
+  j["health_check_ms"] = health_ms;
+  j["health_check_fraction_rk4"] = health_ms / rk4_ms;
+  j["health_check_fraction_symplectic_euler"] = health_ms / se_ms;
   j["all_steps_ok"] = all_ok;
 
   if (json_out) {
@@ -285,6 +292,8 @@ int main(int argc, char** argv) {
     std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d contact solves, %d contacts)\n",
                 "implicit-Euler step", ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
     std::printf("  %-34s %10.4f ms\n", "  free motion", ie_free_ms);
+    std::printf("  %-34s %10.4f ms   (%.2f %% of an RK4 step, %.2f %% of a symplectic-Euler step)\n",
+                "health checks (in every step)", health_ms, 100 * health_ms / rk4_ms, 100 * health_ms / se_ms);
     if (!all_ok) std::printf("\nwarning: some timed steps did not return ok\n");
   }
   return 0;

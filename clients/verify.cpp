@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "clients/cli.h"
+#include "core/health.h"
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/model.h"
@@ -62,7 +63,8 @@ struct Row {
   long steps = 0;
   double sim_time = 0, wall_seconds = 0;
   bool at_rest = false;
-  std::string status = "ok";
+  std::string status = "ok";  // ok, not at rest, diverged (a failed health check: `failure` says which)
+  std::string failure;
 };
 
 double l2_error(const std::vector<Row>& rows, double Row::*ref) {
@@ -210,7 +212,11 @@ int main(int argc, char** argv) {
     });
     row.steps = press.steps;
     row.at_rest = press.at_rest;
-    if (press.status == StepStatus::non_finite) row.status = "diverged";
+    if (press.failure.status != StepStatus::ok) {
+      row.status = "diverged";
+      row.failure = describe(press.failure);
+      if (!quiet) std::fprintf(stderr, "    %s: restored the last good state\n", row.failure.c_str());
+    }
     }
     row.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     row.sim_time = state.time - t0;
@@ -284,7 +290,8 @@ int main(int argc, char** argv) {
                       {"steps", r.steps},
                       {"sim_time", r.sim_time},
                       {"wall_seconds", r.wall_seconds},
-                      {"status", r.status}});
+                      {"status", r.status},
+                      {"failure", r.failure}});
     out["rows"] = list;
     std::cout << out.dump(2) << "\n";
   } else {

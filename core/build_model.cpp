@@ -10,6 +10,7 @@
 
 #include "core/boundary.h"
 #include "core/consistent_integration.h"
+#include "core/time_step.h"
 #include "core/kernel.h"
 #include "core/model.h"
 #include "core/neighbors.h"
@@ -331,6 +332,7 @@ Model build_model(const Scene& scene) {
   spdlog::debug("model {}: {} particles, {} fixed, {} regularised (worst cond {:.3g}), volume {:.4g} of box {:.4g}",
                 scene.model, m.particle_count, m.fixed_count, m.regularized_count, m.worst_condition,
                 m.total_volume, m.box_volume);
+  check_time_step(m);
   return m;
 }
 

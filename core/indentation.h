@@ -39,11 +39,14 @@ class RestMonitor {
 };
 
 // Presses the indenter with `force` from the current state and steps until
-// RestMonitor reports rest, the state turns non-finite, or rest.max_time of
-// simulated time has passed (the quasi-static loading of palpate-verify).
+// RestMonitor reports rest, a health check fails (health.h), or rest.max_time of
+// simulated time has passed (the quasi-static loading of palpate-verify). On a
+// failed check the state is put back to the last good one (saved every 100 steps)
+// and the failure is reported: a NaN never leaves.
 struct PressResult {
   bool at_rest = false;
   StepStatus status = StepStatus::ok;  // the last step's status
+  HealthReport failure;                // the failed check (status != ok), else empty
   long steps = 0;
   double indentation = 0.0;            // m, at the end
 };
@@ -54,6 +57,7 @@ PressResult press_to_rest(const Model& model, State& state, double force);
 
 }  // namespace palpate
 
+#include "core/checkpoint.h"
 #include "core/step.h"
 
 namespace palpate {
@@ -63,13 +67,20 @@ PressResult press_to_rest(const Model& model, State& state, double force, Observ
   const RestSpec& spec = model.scene.verify.rest;
   RestMonitor rest(spec);
   state.force_command = force;
+  Checkpoint last_good(state);
   PressResult result;
   const long max_steps = static_cast<long>(std::ceil(spec.max_time / model.scene.integrator.dt));
   for (; result.steps < max_steps && !result.at_rest;) {
     result.status = step(model, state);
     ++result.steps;
+    if (result.status != StepStatus::ok && result.status != StepStatus::contact_not_converged) {
+      result.failure = state.health.report;
+      last_good.restore(state);
+      result.indentation = indentation(model, state);
+      return result;
+    }
     observer(state);
-    if (result.status == StepStatus::non_finite) return result;
+    if (result.steps % 100 == 0) last_good.save(state);
     result.at_rest = rest.update(model, state);
   }
   result.indentation = indentation(model, state);

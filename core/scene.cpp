@@ -274,6 +274,12 @@ class Reader {
     out = static_cast<uint64_t>(x);
   }
 
+  void get(bool& out) const {
+    if (!present()) return;
+    if (!value_->is_boolean()) fail("expected true or false, got " + describe(*value_));
+    out = value_->get<bool>();
+  }
+
   // A non-empty string.
   void get(std::string& out) const {
     if (!present()) return;
@@ -460,12 +466,22 @@ void read_contact(const Reader& r, ContactSpec& c) {
 }
 
 void read_integrator(const Reader& r, IntegratorSpec& in) {
-  r.object({"type", "dt", "damping", "cg_tolerance", "cg_max_iterations"});
+  r.object({"type", "dt", "damping", "cg_tolerance", "cg_max_iterations", "allow_unstable_dt"});
   r["type"].get(in.type, "integrator", kIntegrators);
   r["dt"].get(in.dt, open_closed(0.0, 1.0));
   r["damping"].get(in.damping, closed(0.0, 1e6));
   r["cg_tolerance"].get(in.cg_tolerance, open(0.0, 1.0));
   r["cg_max_iterations"].get(in.cg_max_iterations, 1, 1000000);
+  r["allow_unstable_dt"].get(in.allow_unstable_dt);
+}
+
+void read_health(const Reader& r, HealthSpec& h) {
+  r.object({"enabled", "energy_factor", "max_indenter_speed", "max_penetration", "inversion_sweep_ticks"});
+  r["enabled"].get(h.enabled);
+  r["energy_factor"].get(h.energy_factor, closed_open(1.0, kInf));
+  r["max_indenter_speed"].get(h.max_indenter_speed, closed_open(0.0, kInf));
+  r["max_penetration"].get(h.max_penetration, closed_open(0.0, kInf));
+  r["inversion_sweep_ticks"].get(h.inversion_sweep_ticks, 1, 1000000);
 }
 
 void read_gravity(const Reader& r, Vec3& g) {
@@ -493,7 +509,7 @@ void read_verify(const Reader& r, VerifySpec& v) {
 
 void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   r.object({"name", "model", "body", "mls", "hex_fem", "material", "fixed", "indenter", "contact", "integrator",
-            "gravity", "verify"});
+            "gravity", "verify", "health"});
   r["name"].get(s.name);
   if (const auto* m = r["model"].pick("model", kModels)) s.model = *m;
   read_body(r["body"], base_dir, s);
@@ -510,6 +526,7 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   read_integrator(r["integrator"], s.integrator);
   read_gravity(r["gravity"], s.gravity);
   read_verify(r["verify"], s.verify);
+  read_health(r["health"], s.health);
 }
 
 // ---------------------------------------------------------------------------

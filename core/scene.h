@@ -110,6 +110,18 @@ struct IntegratorSpec {
   double damping = 0.0;          // 1/s, mass-proportional (Rayleigh alpha) damping
   double cg_tolerance = 1e-8;    // implicit Euler: relative residual of the CG solve
   int cg_max_iterations = 1000;  // implicit Euler
+  // Explicit integrators: a dt above the measured stable envelope (time_step.h) is
+  // refused unless the scene opts in.
+  bool allow_unstable_dt = false;
+};
+
+// Per-step health checks (health.h). Zero limits mean "derived from the model".
+struct HealthSpec {
+  bool enabled = true;
+  double energy_factor = 10.0;       // kinetic energy may reach this x (initial energy + work done)
+  double max_indenter_speed = 0.0;   // m/s; 0: one minimum particle spacing per step
+  double max_penetration = 0.0;      // m; 0: contact tolerance + 5 % of the minimum spacing
+  int inversion_sweep_ticks = 64;    // MLS: det F is checked for n / this particles per step
 };
 
 // When a quasi-static run (palpate-verify) calls the state "at rest" (physics.md §2).
@@ -140,6 +152,7 @@ struct Scene {
   IntegratorSpec integrator;
   Vec3 gravity{0.0, 0.0, 0.0};  // m/s^2, acts on the body and the indenter
   VerifySpec verify;
+  HealthSpec health;
 };
 
 // "key=value" overrides applied to the JSON before validation; key is the dotted

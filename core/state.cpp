@@ -1,5 +1,7 @@
 #include "core/state.h"
 
+#include "core/health.h"
+
 namespace palpate {
 
 State make_state(const Model& model) {
@@ -46,6 +48,7 @@ State make_state(const Model& model) {
   w.solve_buffer.reserve(m * m + m);
   w.active.reserve(m);
   w.members.reserve(m);
+  reset_health(model, s);
   return s;
 }
 

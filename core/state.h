@@ -34,7 +34,47 @@ struct Workspace {
   std::vector<int> members;            // indices of the active candidates
 };
 
-enum class StepStatus { ok, non_finite, contact_not_converged };
+// What a step reports (health.h describes the checks behind each).
+enum class StepStatus {
+  ok,
+  non_finite,             // NaN or Inf in the state
+  contact_not_converged,  // the contact solve ran out of pivots
+  energy_jump,            // kinetic energy far above the energy put in
+  indenter_speed,         // the sphere moves faster than contact can follow
+  penetration,            // a particle deep inside the sphere after the contact solve
+  inverted_particle,      // det F <= 0 at a particle, without a volume term to undo it
+};
+
+// The last failed health check: what, where, when, and by how much.
+struct HealthReport {
+  StepStatus status = StepStatus::ok;
+  int64_t tick = 0;
+  int particle = -1;   // the offending particle, -1 if none
+  double value = 0.0;  // the measured quantity (J, m/s, m or det F)
+  double limit = 0.0;  // its limit
+};
+
+// The health limits in force (the scene's "health" fields, or derived from the model).
+struct HealthLimits {
+  double energy_factor = 0.0;
+  double energy_floor = 0.0;        // J
+  double max_indenter_speed = 0.0;  // m/s
+  double max_penetration = 0.0;     // m
+  int inversion_window = 0;         // MLS particles whose det F is checked per step (0: none)
+};
+
+// Health-check bookkeeping carried from step to step (health.h).
+struct HealthMonitor {
+  HealthLimits limits;            // set by reset_health()
+  double energy_input = 0.0;      // J: initial energy + work of the command and gravity so far
+  double energy_budget = 0.0;     // J: the running maximum of energy_input
+  double kinetic_energy = 0.0;    // J, body + indenter, at the last check
+  double indenter_z = 0.0;        // m, indenter height at the last check (work of the command)
+  double gravity_potential = 0.0; // sum m_i g . x_i + M g . c at the last check (work of gravity), J
+  int inversion_cursor = 0;       // first particle of the next inversion window
+  int64_t inverted = 0;           // inverted particles seen (k_v > 0: tolerated, counted)
+  HealthReport report;            // the last failure
+};
 
 struct State {
   Points position;  // 3 x n, x_i, m
@@ -55,6 +95,8 @@ struct State {
   double time = 0.0;  // s
   int64_t tick = 0;
   int cg_iterations = 0;  // implicit Euler, last step (free motion solve)
+
+  HealthMonitor health;
 
   Workspace work;
 };

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "core/contact.h"
+#include "core/health.h"
 #include "core/integrators.h"
 
 namespace palpate {
@@ -27,7 +28,8 @@ StepStatus step(const Model& model, State& state) {
   }
   state.time += model.scene.integrator.dt;
   ++state.tick;
-  // A NaN or Inf anywhere in the positions makes their sum non-finite.
+  if (model.scene.health.enabled) return check_health(model, state, status);
+  // Checks off: only finiteness (a NaN or Inf anywhere in the positions makes their sum non-finite).
   if (!std::isfinite(state.position.sum() + state.indenter_center[2] + state.indenter_velocity))
     return StepStatus::non_finite;
   return status;
@@ -38,6 +40,10 @@ const char* to_string(StepStatus s) {
     case StepStatus::ok: return "ok";
     case StepStatus::non_finite: return "non-finite state";
     case StepStatus::contact_not_converged: return "contact solve did not converge";
+    case StepStatus::energy_jump: return "energy jump";
+    case StepStatus::indenter_speed: return "indenter too fast";
+    case StepStatus::penetration: return "penetration beyond tolerance";
+    case StepStatus::inverted_particle: return "inverted particle";
   }
   return "?";
 }

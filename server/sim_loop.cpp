@@ -15,6 +15,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/health.h"
 #include "core/indentation.h"
 #include "core/step.h"
 
@@ -98,45 +99,6 @@ Histogram::Summary Histogram::summary() const {
   s.p99 = quantile(0.99);
   return s;
 }
-
-// ---------------------------------------------------------------------------
-// Checkpoint: the fields of State that carry over between steps (Workspace is
-// scratch). Copies into preallocated storage, so saving and restoring allocate nothing.
-
-struct Simulation::Checkpoint {
-  Points position, velocity, contact_force;
-  Vec3 indenter_center{0, 0, 0};
-  double indenter_velocity = 0.0, indenter_contact_force = 0.0;
-  std::vector<int> contact_index;
-  std::vector<double> contact_multiplier;
-
-  explicit Checkpoint(const State& s) {
-    contact_index.reserve(s.contact_index.capacity());
-    contact_multiplier.reserve(s.contact_multiplier.capacity());
-    save(s);
-  }
-  void save(const State& s) {
-    position = s.position;
-    velocity = s.velocity;
-    contact_force = s.contact_force;
-    indenter_center = s.indenter_center;
-    indenter_velocity = s.indenter_velocity;
-    indenter_contact_force = s.indenter_contact_force;
-    contact_index.assign(s.contact_index.begin(), s.contact_index.end());
-    contact_multiplier.assign(s.contact_multiplier.begin(), s.contact_multiplier.end());
-  }
-  // Physical fields only: time, tick and the command are the caller's.
-  void restore(State& s) const {
-    s.position = position;
-    s.velocity = velocity;
-    s.contact_force = contact_force;
-    s.indenter_center = indenter_center;
-    s.indenter_velocity = indenter_velocity;
-    s.indenter_contact_force = indenter_contact_force;
-    s.contact_index.assign(contact_index.begin(), contact_index.end());
-    s.contact_multiplier.assign(contact_multiplier.begin(), contact_multiplier.end());
-  }
-};
 
 // ---------------------------------------------------------------------------
 // Simulation
@@ -349,8 +311,8 @@ bool Simulation::tick_once() {
   ticks_.fetch_add(1, std::memory_order_relaxed);
   if (ticks_since_recovery_ >= 0) ++ticks_since_recovery_;
 
-  if (status == StepStatus::non_finite) recover("non-finite state");
-  else if (!std::isfinite(state.indenter_contact_force)) recover("non-finite contact force");
+  // A failed health check (health.h) or a state gone far away: back to the last good state.
+  if (status != StepStatus::ok && status != StepStatus::contact_not_converged) recover(describe(state.health.report));
   else if (diverged(model, state)) recover("diverged state (displacement beyond 10 box diagonals)");
   else if (config_.checkpoint_interval > 0 && state.tick % config_.checkpoint_interval == 0) checkpoint_->save(state);
   return true;
@@ -359,7 +321,7 @@ bool Simulation::tick_once() {
 // Restores the last good state. A second blow-up soon after a recovery means the
 // checkpoint itself was on its way out (or the command cannot be held): restore
 // the rest state and the scene's initial force instead.
-void Simulation::recover(const char* what) {
+void Simulation::recover(const std::string& what) {
   const Model& model = *model_;
   State& state = *state_;
   const uint32_t count = blow_ups_.fetch_add(1, std::memory_order_relaxed) + 1;
@@ -377,7 +339,7 @@ void Simulation::recover(const char* what) {
     how = "restored the last checkpoint (every " + std::to_string(config_.checkpoint_interval) + " ticks)";
   }
   ticks_since_recovery_ = 0;
-  const std::string message = std::string(what) + " at tick " + std::to_string(state.tick) + ": " + how;
+  const std::string message = what + ": " + how;
   {
     std::lock_guard<std::mutex> lock(text_mutex_);
     last_blow_up_ = message;

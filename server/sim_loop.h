@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/checkpoint.h"
 #include "core/model.h"
 #include "core/scene.h"
 #include "core/state.h"
@@ -116,7 +117,6 @@ class Simulation {
   SimStatus status() const;
 
  private:
-  struct Checkpoint;
   struct Command {
     CommandType type;
     double value;
@@ -128,7 +128,7 @@ class Simulation {
   void run_headless();
   // Drains commands and steps once; false when paused (no step).
   bool tick_once();
-  void recover(const char* what);
+  void recover(const std::string& what);
   void publish();
   void notify();
 

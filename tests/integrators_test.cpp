@@ -6,6 +6,7 @@
 #include <cmath>
 #include <vector>
 
+#include "core/health.h"
 #include "core/solid.h"
 #include "core/state.h"
 #include "core/step.h"
@@ -33,12 +34,14 @@ double total_energy(const Model& m, const State& s) {
   return kinetic + elastic_energy(m, s.position);
 }
 
-// A smooth initial velocity field (a twist plus a stretch), 0.05 m/s.
+// A smooth initial velocity field (a twist plus a stretch), 0.05 m/s. A state set by
+// hand restarts the health checks' energy budget (health.h).
 void set_initial_velocity(const Model& m, State& s) {
   for (int i = 0; i < m.particle_count; ++i) {
     const Vec3 X = m.rest_position.col(i) - Vec3(0.5, 0.5, 0.5);
     s.velocity.col(i) = 0.05 * Vec3(-X[1] * X[2] + X[0], X[0] * X[2], 0.5 * X[2] * X[2]);
   }
+  reset_health(m, s);
 }
 
 // Energy history over `duration` seconds.

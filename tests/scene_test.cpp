@@ -232,7 +232,7 @@ TEST(SceneErrors, UnknownTopLevelField) {
   EXPECT_EQ(e.field(), "/materials");
   EXPECT_EQ(e.reason(),
             "unknown field (known: name, model, body, mls, hex_fem, material, fixed, indenter, contact, integrator, gravity, "
-            "verify)");
+            "verify, health)");
 }
 
 TEST(SceneErrors, UnknownNestedField) {

@@ -1,0 +1,166 @@
+#include "core/health.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include <Eigen/LU>
+
+#include "core/mls_forces.h"
+#include "core/solid.h"
+#include "core/step.h"
+
+namespace palpate {
+
+namespace {
+
+// Kinetic energy 1/2 sum m_i |v_i|^2 + 1/2 M v_c^2 (J), and the gravity potential
+// sum m_i g . x_i + M g . c (J) when gravity is on. NaN in, NaN out: the sums carry it.
+struct EnergyPass {
+  double kinetic = 0.0;
+  double gravity_potential = 0.0;
+  double position_sum = 0.0;
+};
+
+EnergyPass energy_pass(const Model& model, const State& state) {
+  const int n = model.particle_count;
+  const auto mass = Eigen::Map<const Eigen::VectorXd>(model.mass.data(), n);
+  EnergyPass e;
+  // Flat, vectorisable reductions over the 3 x n arrays the step has just written.
+  e.kinetic = 0.5 * state.velocity.colwise().squaredNorm().dot(mass.transpose()) +
+              0.5 * model.indenter_mass * state.indenter_velocity * state.indenter_velocity;
+  e.position_sum = state.position.sum();
+  const Vec3& g = model.scene.gravity;
+  if (g.squaredNorm() > 0)
+    e.gravity_potential = (g.transpose() * state.position).dot(mass.transpose()) + model.indenter_mass * g.dot(state.indenter_center);
+  return e;
+}
+
+StepStatus fail(State& state, StepStatus status, int particle, double value, double limit) {
+  state.health.report = {status, state.tick, particle, value, limit};
+  return status;
+}
+
+}  // namespace
+
+HealthLimits health_limits(const Model& model) {
+  const HealthSpec& spec = model.scene.health;
+  const double dt = model.scene.integrator.dt;
+  HealthLimits l;
+  l.energy_factor = spec.energy_factor;
+  double body_mass = 0.0;
+  for (int i = 0; i < model.particle_count; ++i)
+    if (!model.fixed[i]) body_mass += model.mass[i];
+  l.energy_floor = 0.5 * body_mass * 1e-4;  // 1/2 M (1 cm/s)^2
+  l.max_indenter_speed = spec.max_indenter_speed > 0 ? spec.max_indenter_speed : model.min_spacing / dt;
+  l.max_penetration =
+      spec.max_penetration > 0 ? spec.max_penetration : model.scene.contact.tolerance + 0.05 * model.min_spacing;
+  if (model.solid == SolidKind::mls)
+    l.inversion_window = (model.particle_count + spec.inversion_sweep_ticks - 1) / spec.inversion_sweep_ticks;
+  return l;
+}
+
+void reset_health(const Model& model, State& state) {
+  HealthMonitor& h = state.health;
+  h.limits = health_limits(model);
+  const EnergyPass e = energy_pass(model, state);
+  const double strain = elastic_energy(model, state.position);
+  h.energy_input = e.kinetic + strain;
+  h.energy_budget = h.energy_input;
+  h.kinetic_energy = e.kinetic;
+  h.indenter_z = state.indenter_center[2];
+  h.gravity_potential = e.gravity_potential;
+  h.inversion_cursor = 0;
+}
+
+StepStatus check_health(const Model& model, State& state, StepStatus status) {
+  HealthMonitor& h = state.health;
+  const HealthLimits& limits = h.limits;
+
+  // Non-finite values: one pass also gives the kinetic energy.
+  const EnergyPass e = energy_pass(model, state);
+  if (!std::isfinite(e.kinetic + e.position_sum + state.indenter_center.sum() + state.indenter_contact_force))
+    return fail(state, StepStatus::non_finite, -1, NAN, 0.0);
+  if (status != StepStatus::ok) return fail(state, status, -1, 0.0, 0.0);
+
+  // Energy: work of the command (pressing down, -z) and of gravity since the last check.
+  const double z = state.indenter_center[2];
+  h.energy_input += state.force_command * (h.indenter_z - z) + (e.gravity_potential - h.gravity_potential);
+  h.energy_budget = std::max(h.energy_budget, h.energy_input);
+  h.indenter_z = z;
+  h.gravity_potential = e.gravity_potential;
+  h.kinetic_energy = e.kinetic;
+  const double energy_limit = limits.energy_factor * h.energy_budget + limits.energy_floor;
+  if (e.kinetic > energy_limit) return fail(state, StepStatus::energy_jump, -1, e.kinetic, energy_limit);
+
+  if (std::abs(state.indenter_velocity) > limits.max_indenter_speed)
+    return fail(state, StepStatus::indenter_speed, -1, std::abs(state.indenter_velocity), limits.max_indenter_speed);
+
+  // Penetration: the true gap |x_i - c| - R of this step's contact candidates.
+  const double R = model.indenter_radius;
+  for (const int i : state.work.candidate) {
+    const double gap = (state.position.col(i) - state.indenter_center).norm() - R;
+    if (-gap > limits.max_penetration) return fail(state, StepStatus::penetration, i, -gap, limits.max_penetration);
+  }
+
+  // Inversion: det F over a rotating window of MLS particles.
+  if (limits.inversion_window > 0) {
+    const int n = model.particle_count;
+    int i = h.inversion_cursor;
+    for (int c = 0; c < limits.inversion_window; ++c, ++i) {
+      if (i >= n) i = 0;
+      if (model.fixed[i]) continue;
+      const double J = deformation_gradient(model, state.position, i).determinant();
+      if (J <= 0) {
+        if (model.volume_stiffness > 0) {
+          ++h.inverted;
+        } else {
+          h.inversion_cursor = i + 1;
+          return fail(state, StepStatus::inverted_particle, i, J, 0.0);
+        }
+      }
+    }
+    h.inversion_cursor = i >= n ? 0 : i;
+  }
+  return StepStatus::ok;
+}
+
+std::string describe(const HealthReport& r) {
+  char text[256];
+  const long long tick = static_cast<long long>(r.tick);
+  switch (r.status) {
+    case StepStatus::ok: std::snprintf(text, sizeof text, "healthy at tick %lld", tick); break;
+    case StepStatus::non_finite:
+      std::snprintf(text, sizeof text, "non-finite state (NaN or Inf) at tick %lld", tick);
+      break;
+    case StepStatus::contact_not_converged:
+      std::snprintf(text, sizeof text, "contact solve did not converge at tick %lld", tick);
+      break;
+    case StepStatus::energy_jump:
+      std::snprintf(text, sizeof text,
+                    "energy jump at tick %lld: kinetic energy %.4g J above the limit %.4g J "
+                    "(health.energy_factor x (initial energy + work done) + floor)",
+                    tick, r.value, r.limit);
+      break;
+    case StepStatus::indenter_speed:
+      std::snprintf(text, sizeof text,
+                    "indenter speed %.4g m/s above the limit %.4g m/s at tick %lld (health.max_indenter_speed)",
+                    r.value, r.limit, tick);
+      break;
+    case StepStatus::penetration:
+      std::snprintf(text, sizeof text,
+                    "particle %d is %.4g m inside the sphere at tick %lld, beyond the limit %.4g m "
+                    "(health.max_penetration)",
+                    r.particle, r.value, tick, r.limit);
+      break;
+    case StepStatus::inverted_particle:
+      std::snprintf(text, sizeof text,
+                    "particle %d inverted (det F = %.4g) at tick %lld, and the scene has no volume term "
+                    "(material.volume_stiffness = 0) to restore it",
+                    r.particle, r.value, tick);
+      break;
+  }
+  return text;
+}
+
+}  // namespace palpate

@@ -1,0 +1,45 @@
+#pragma once
+// Per-step health checks (scene field "health"): the last stage of step(). Cheap
+// by construction — one pass over the velocities, the contact candidates, and a
+// rotating window of deformation gradients — so that a numerical blow-up is caught
+// on the tick it happens, with its reason, before the state leaves the core.
+//
+// Checks, in order (the first failure is reported):
+//  - non_finite:        a NaN or Inf in positions, velocities, the indenter or the contact force;
+//  - energy_jump:       kinetic energy (body + indenter) above energy_factor x the energy budget
+//                       (initial energy + work of the command and of gravity, its running maximum;
+//                       the total energy can only be below it, with damping less) plus a floor
+//                       of 1/2 M_body (1 cm/s)^2;
+//  - indenter_speed:    |v_indenter| above max_indenter_speed (default: one minimum particle
+//                       spacing per step, beyond which contact can tunnel);
+//  - penetration:       a contact candidate deeper inside the sphere than max_penetration (default:
+//                       the contact tolerance + 5 % of the minimum spacing) after the contact solve;
+//  - inverted_particle: det F_i <= 0 at an MLS particle (checked for n / inversion_sweep_ticks
+//                       particles per step, all of them every inversion_sweep_ticks steps). Only a
+//                       fault without the volume term (k_v = 0): with k_v > 0 the solid is meant to
+//                       push the particle back, and State::health.inverted counts them instead.
+// The hex FEM has no inversion check (its linear and corotational forms have no det F).
+#include <cstdint>
+#include <string>
+
+#include "core/model.h"
+#include "core/state.h"
+
+namespace palpate {
+
+// Runs the checks after a step; `status` is what the step's stages reported.
+// Returns the first failure (or `status`), and records it in state.health.report.
+StepStatus check_health(const Model& model, State& state, StepStatus status);
+
+// Restarts the energy budget from the state as it is (initial energy = kinetic +
+// strain energy: one energy evaluation). make_state() calls it; so must whoever
+// sets or restores a state by hand (Checkpoint::restore does).
+void reset_health(const Model& model, State& state);
+
+// The limits for a model (the scene's, or derived from the model where the scene says 0).
+HealthLimits health_limits(const Model& model);
+
+// "energy jump at tick 1234: kinetic energy 5.2 J above the limit 3.1 J (10 x budget + floor)".
+std::string describe(const HealthReport& report);
+
+}  // namespace palpate
