@@ -15,22 +15,37 @@
 // (default 30) it reads the session's statistics and prints a table, or with
 // --json one JSON object. The benchmark's own thread asks for SCHED_FIFO 5 (a
 // haptic front-end would run real-time too); "client_fifo" says if it got it.
+//
+// --soak S runs the same measurement for S seconds while a churn thread plays the
+// hostile public (issue #7): it connects, attaches to the session, subscribes at a
+// random rate (some sinks never return: stalled readers), sends valid and hostile
+// commands (NaN, Inf, 1e12 N: each must be refused), writes garbage bytes to the
+// port, and vanishes without unsubscribing, at random, without pause. It adds to
+// the output the server's resident memory after a warm-up and at the end
+// (rss_start_mb, rss_end_mb, sampled every 10 s in rss_samples_mb), the number of
+// recovered blow-ups (recoveries) and what the churn did.
 #include <fcntl.h>
 #include <limits.h>
 #include <pthread.h>
 #include <sched.h>
 #include <signal.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <fstream>
 #include <memory>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
@@ -55,6 +70,7 @@ struct Args {
   std::string scene = PALPATE_SOURCE_DIR "/scenes/hertz_cube.json";
   double rate = 1000.0;
   int viewers = 4;
+  double soak = 0.0;  // > 0: soak for this many seconds (churn thread on)
   std::string connect;
   std::string server;
 };
@@ -62,8 +78,8 @@ struct Args {
 [[noreturn]] void usage(const std::string& error) {
   std::fprintf(stderr,
                "palpate-bench-server: %s\n"
-               "usage: palpate-bench-server [--json] [--seconds S] [--scene FILE] [--rate HZ] [--viewers N]\n"
-               "                            [--connect ADDR:PORT] [--server PATH]\n",
+               "usage: palpate-bench-server [--json] [--seconds S] [--soak S] [--scene FILE] [--rate HZ]\n"
+               "                            [--viewers N] [--connect ADDR:PORT] [--server PATH]\n",
                error.c_str());
   std::exit(2);
 }
@@ -78,6 +94,7 @@ Args parse_args(int argc, char** argv) {
     };
     if (flag == "--json") a.json = true;
     else if (flag == "--seconds") a.seconds = std::atof(value().c_str());
+    else if (flag == "--soak") a.soak = a.seconds = std::atof(value().c_str());
     else if (flag == "--scene") a.scene = fs::absolute(value()).string();
     else if (flag == "--rate") a.rate = std::atof(value().c_str());
     else if (flag == "--viewers") a.viewers = std::atoi(value().c_str());
@@ -85,7 +102,7 @@ Args parse_args(int argc, char** argv) {
     else if (flag == "--server") a.server = value();
     else usage("unknown option " + flag);
   }
-  if (!(a.seconds > 0 && a.seconds <= 3600)) usage("--seconds must be in (0, 3600]");
+  if (!(a.seconds > 0 && a.seconds <= 86400)) usage("--seconds and --soak must be in (0, 86400]");
   if (a.viewers < 0 || a.viewers > 32) usage("--viewers must be in [0, 32]");
   return a;
 }
@@ -152,6 +169,113 @@ class Recorder final : public FrameSink::Server {
   }
   kj::Promise<void> done(DoneContext) override { return kj::READY_NOW; }
 };
+
+// Resident memory of a process, MB (VmRSS); NaN if unknown.
+double rss_mb(pid_t pid) {
+  std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+  std::string key;
+  while (status >> key) {
+    if (key == "VmRSS:") {
+      double kb = 0;
+      status >> kb;
+      return kb / 1024.0;
+    }
+    status.ignore(1 << 20, '\n');
+  }
+  return NAN;
+}
+
+// A sink that never finishes a frame: a reader that stopped reading.
+class StalledSink final : public FrameSink::Server {
+ protected:
+  kj::Promise<void> frame(FrameContext) override { return kj::NEVER_DONE; }
+  kj::Promise<void> done(DoneContext) override { return kj::READY_NOW; }
+};
+
+class CountingSink final : public FrameSink::Server {
+ protected:
+  kj::Promise<void> frame(FrameContext) override { return kj::READY_NOW; }
+  kj::Promise<void> done(DoneContext) override { return kj::READY_NOW; }
+};
+
+struct Churn {
+  std::atomic<uint64_t> connections{0}, subscriptions{0}, stalled{0}, valid_commands{0}, hostile_commands{0},
+      hostile_accepted{0}, garbage{0}, errors{0};
+};
+
+// Random raw bytes to the server's port, then hang up.
+void send_garbage(const std::string& address, std::mt19937_64& rng) {
+  const auto colon = address.rfind(':');
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<uint16_t>(std::atoi(address.c_str() + colon + 1)));
+  if (inet_pton(AF_INET, address.substr(0, colon).c_str(), &addr.sin_addr) != 1) return;
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) return;
+  if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0) {
+    std::vector<uint8_t> junk(1 + rng() % 65536);
+    for (auto& b : junk) b = static_cast<uint8_t>(rng());
+    if (rng() % 2) std::fill(junk.begin(), junk.begin() + std::min<size_t>(8, junk.size()), 0xff);
+    [[maybe_unused]] const ssize_t n = write(fd, junk.data(), junk.size());
+  }
+  close(fd);
+}
+
+// The churn thread: clients that come, misbehave and vanish, until `stop`.
+void churn(const std::string& address, uint32_t session_id, const std::atomic<bool>& stop, Churn& c) {
+  std::mt19937_64 rng(20261201);
+  capnp::ReaderOptions options;
+  options.traversalLimitInWords = 256 * 1024 * 1024;
+  const double hostile[] = {NAN, HUGE_VAL, -HUGE_VAL, 1e12, -1e12};
+  while (!stop.load()) {
+    if (rng() % 5 == 0) {
+      send_garbage(address, rng);
+      ++c.garbage;
+      continue;
+    }
+    try {
+      capnp::EzRpcClient client(address, 7420, options);
+      auto& ws = client.getWaitScope();
+      auto& timer = client.getIoProvider().getTimer();
+      ++c.connections;
+      auto attach = client.getMain<PalpateServer>().attachRequest();
+      attach.setSessionId(session_id);
+      auto session = attach.send().wait(ws).getSession();
+      std::vector<palpate::wire::Subscription::Client> subs;
+      for (int k = static_cast<int>(rng() % 3); k > 0; --k) {
+        auto req = session.subscribeRequest();
+        const bool stall = rng() % 3 == 0;
+        if (stall) {
+          req.setSink(kj::heap<StalledSink>());
+          ++c.stalled;
+        } else {
+          req.setSink(kj::heap<CountingSink>());
+        }
+        const double rates[] = {0.0, 60.0, 250.0, 1000.0};
+        req.getOptions().setRateHz(rates[rng() % 4]);
+        req.getOptions().getFields().setPositions(rng() % 2);
+        req.getOptions().getFields().setContacts(rng() % 2);
+        subs.push_back(req.send().wait(ws).getSubscription());
+        ++c.subscriptions;
+      }
+      for (int k = static_cast<int>(rng() % 6); k > 0; --k) {
+        auto req = session.setForceRequest();
+        const bool bad = rng() % 2;
+        req.setNewtons(bad ? hostile[rng() % 5] : 10.0 + static_cast<double>(rng() % 3200) / 10.0);
+        try {
+          req.send().wait(ws);
+          ++(bad ? c.hostile_accepted : c.valid_commands);
+        } catch (const kj::Exception&) {
+          ++(bad ? c.hostile_commands : c.errors);
+        }
+      }
+      timer.afterDelay((20 + rng() % 500) * kj::MILLISECONDS).wait(ws);
+      // Vanish: the connection drops with its subscriptions still open.
+    } catch (const kj::Exception&) {
+      ++c.errors;
+    }
+  }
+}
 
 double percentile(std::vector<double> v, double q) {
   if (v.empty()) return NAN;
@@ -229,7 +353,16 @@ int main(int argc, char** argv) {
     }
 
     // Warm-up, then the measured window: a command every 50 ms.
-    timer.afterDelay(500 * kj::MILLISECONDS).wait(ws);
+    timer.afterDelay((a.soak > 0 ? 5000 : 500) * kj::MILLISECONDS).wait(ws);
+    const pid_t server_pid = child ? child->pid : -1;
+    const double rss_start = server_pid > 0 ? rss_mb(server_pid) : NAN;
+    std::vector<double> rss_samples;
+    Churn churned;
+    std::atomic<bool> stop_churn{false};
+    std::thread churn_thread;
+    if (a.soak > 0) churn_thread = std::thread([&] { churn(address, session_id, stop_churn, churned); });
+    auto last_sample = Clock::now();
+    auto last_progress = Clock::now();
     auto stats0_response = session.statsRequest().send().wait(ws);
     auto stats0 = stats0_response.getStats();
     const int64_t ticks0 = stats0.getTicks();
@@ -243,7 +376,22 @@ int main(int argc, char** argv) {
       const uint64_t seq = req.send().wait(ws).getSeq();
       sent.emplace(seq, t);
       timer.afterDelay(50 * kj::MILLISECONDS).wait(ws);
+      if (a.soak > 0 && Clock::now() - last_sample >= std::chrono::seconds(10)) {
+        last_sample = Clock::now();
+        if (server_pid > 0) rss_samples.push_back(rss_mb(server_pid));
+      }
+      if (a.soak > 0 && Clock::now() - last_progress >= std::chrono::seconds(60)) {
+        last_progress = Clock::now();
+        std::fprintf(stderr, "palpate-bench-server: soak %.0f / %.0f s, server RSS %.1f MB, %llu churn connections\n",
+                     std::chrono::duration<double>(Clock::now() - start).count(), a.seconds,
+                     server_pid > 0 ? rss_mb(server_pid) : NAN,
+                     static_cast<unsigned long long>(churned.connections.load()));
+      }
     }
+    stop_churn = true;
+    if (churn_thread.joinable()) churn_thread.join();
+    timer.afterDelay(1000 * kj::MILLISECONDS).wait(ws);  // let the server drop the vanished clients
+    const double rss_end = server_pid > 0 ? rss_mb(server_pid) : NAN;
     auto stats_response = session.statsRequest().send().wait(ws);
     auto stats = stats_response.getStats();
 
@@ -270,6 +418,24 @@ int main(int argc, char** argv) {
     };
     const auto step = stats.getStepUs();
     const auto late = stats.getLatenessUs();
+    auto number = [](double x) { return std::isfinite(x) ? std::to_string(x) : std::string("null"); };
+    std::string soak_json;
+    if (a.soak > 0) {
+      std::string samples = "[";
+      for (size_t k = 0; k < rss_samples.size(); ++k) samples += (k ? ", " : "") + number(rss_samples[k]);
+      samples += "]";
+      auto count = [](const std::atomic<uint64_t>& v) { return std::to_string(v.load()); };
+      soak_json = ", \"soak_seconds\": " + number(a.soak) + ", \"rss_start_mb\": " + number(rss_start) +
+                  ", \"rss_end_mb\": " + number(rss_end) + ", \"rss_samples_mb\": " + samples +
+                  ", \"recoveries\": " + std::to_string(stats.getBlowUps()) +
+                  ", \"churn\": {\"connections\": " + count(churned.connections) +
+                  ", \"subscriptions\": " + count(churned.subscriptions) + ", \"stalled_sinks\": " +
+                  count(churned.stalled) + ", \"valid_commands\": " + count(churned.valid_commands) +
+                  ", \"hostile_commands_refused\": " + count(churned.hostile_commands) +
+                  ", \"hostile_commands_accepted\": " + count(churned.hostile_accepted) +
+                  ", \"garbage_connections\": " + count(churned.garbage) + ", \"errors\": " +
+                  count(churned.errors) + "}";
+    }
     if (a.json) {
       std::printf(
           "{\"scene\": \"%s\", \"particles\": %u, \"seconds\": %.1f, \"target_rate_hz\": %.1f, \"rate_hz\": %.2f, "
@@ -278,7 +444,7 @@ int main(int argc, char** argv) {
           "\"deadline_misses\": %llu, \"deadline_miss_ratio\": %.6f, \"skipped_ticks\": %llu, "
           "\"latency_p50_ms\": %.3f, \"latency_p99_ms\": %.3f, \"latency_max_ms\": %.3f, \"commands\": %zu, "
           "\"full_rate_frames\": %llu, \"full_rate_dropped\": %llu, \"dropped_frames\": %s, "
-          "\"viewer_frames\": %s, \"blow_ups\": %u, \"realtime_priority\": %s, \"client_fifo\": %s}\n",
+          "\"viewer_frames\": %s, \"blow_ups\": %u, \"realtime_priority\": %s, \"client_fifo\": %s%s}\n",
           a.scene.c_str(), particles, a.seconds, stats.getTargetRateHz(), rate,
           static_cast<long long>(stats.getTicks()), step.getP50(), step.getP99(), step.getMax(), late.getP50(),
           late.getP99(), late.getMax(), static_cast<unsigned long long>(stats.getDeadlineMisses()), miss_ratio,
@@ -286,7 +452,7 @@ int main(int argc, char** argv) {
           percentile(latency_ms, 0.99), percentile(latency_ms, 1.0), latency_ms.size(),
           static_cast<unsigned long long>(recorder.frames), static_cast<unsigned long long>(full_rate_dropped),
           list(dropped).c_str(), list(received).c_str(), stats.getBlowUps(),
-          stats.getRealtimePriority() ? "true" : "false", client_fifo ? "true" : "false");
+          stats.getRealtimePriority() ? "true" : "false", client_fifo ? "true" : "false", soak_json.c_str());
     } else {
       std::printf("scene %s (%u particles), %.0f s at %.0f Hz target, 1 full-rate subscriber + %d viewers at 60 Hz\n",
                   a.scene.c_str(), particles, a.seconds, stats.getTargetRateHz(), a.viewers);
@@ -305,6 +471,20 @@ int main(int argc, char** argv) {
       std::printf("full-rate frames  %llu received, %llu dropped\n", static_cast<unsigned long long>(recorder.frames),
                   static_cast<unsigned long long>(full_rate_dropped));
       std::printf("viewer frames     received %s, dropped %s\n", list(received).c_str(), list(dropped).c_str());
+      if (a.soak > 0) {
+        std::printf("server memory     %.1f MB after warm-up, %.1f MB at the end\n", rss_start, rss_end);
+        std::printf("recoveries        %u blow-ups recovered\n", stats.getBlowUps());
+        std::printf("churn             %llu connections, %llu subscriptions (%llu stalled), %llu valid and %llu "
+                    "refused hostile commands (%llu hostile accepted), %llu garbage connections, %llu errors\n",
+                    static_cast<unsigned long long>(churned.connections.load()),
+                    static_cast<unsigned long long>(churned.subscriptions.load()),
+                    static_cast<unsigned long long>(churned.stalled.load()),
+                    static_cast<unsigned long long>(churned.valid_commands.load()),
+                    static_cast<unsigned long long>(churned.hostile_commands.load()),
+                    static_cast<unsigned long long>(churned.hostile_accepted.load()),
+                    static_cast<unsigned long long>(churned.garbage.load()),
+                    static_cast<unsigned long long>(churned.errors.load()));
+      }
     }
   } catch (const kj::Exception& e) {
     std::fprintf(stderr, "palpate-bench-server: %s\n", e.getDescription().cStr());
