@@ -176,11 +176,15 @@ void build_mls(Model& m, const NodeCloud& cloud) {
   const double rho = scene.material.density;
   m.mass.resize(n);
   m.volume.resize(n);
-  if (scene.mls.volumes == VolumeRule::lattice) {
-    if (cloud.lattice_volume.empty())
-      throw SceneError(scene.source, "/mls/volumes", "lattice volumes need a lattice distribution");
+  if (scene.mls.volumes == VolumeRule::lattice || scene.mls.volumes == VolumeRule::mesh) {
+    // Lattice cell volumes, or the lumped tetrahedra v_i = sum_t |V_t| / 4 (mesh_reader.h).
+    const bool lattice = scene.mls.volumes == VolumeRule::lattice;
+    const std::vector<double>& volume = lattice ? cloud.lattice_volume : cloud.mesh_volume;
+    if (volume.size() != static_cast<size_t>(n))
+      throw SceneError(scene.source, "/mls/volumes",
+                       lattice ? "lattice volumes need a lattice distribution" : "mesh volumes need a mesh distribution");
     for (int i = 0; i < n; ++i) {
-      m.volume[i] = cloud.lattice_volume[i];
+      m.volume[i] = volume[i];
       m.mass[i] = rho * m.volume[i];
     }
   } else {
@@ -320,6 +324,8 @@ Model build_model(const Scene& scene) {
   const NodeCloud cloud = make_node_cloud(scene);
   m.particle_count = static_cast<int>(cloud.positions.cols());
   m.rest_position = cloud.positions;
+  m.mesh_tetrahedra = cloud.mesh_tetrahedra;
+  m.mesh_unused_nodes = cloud.mesh_unused_nodes;
   m.box_volume = (scene.box.max - scene.box.min).prod();
   set_material(m);
   if (scene.model == "mls")
@@ -332,6 +338,9 @@ Model build_model(const Scene& scene) {
   spdlog::debug("model {}: {} particles, {} fixed, {} regularised (worst cond {:.3g}), volume {:.4g} of box {:.4g}",
                 scene.model, m.particle_count, m.fixed_count, m.regularized_count, m.worst_condition,
                 m.total_volume, m.box_volume);
+  if (scene.distribution.type == DistributionType::mesh)
+    spdlog::debug("mesh {}: {} tetrahedra, {} unused nodes dropped", scene.distribution.mesh_file.string(),
+                  m.mesh_tetrahedra, m.mesh_unused_nodes);
   check_time_step(m);
   return m;
 }

@@ -1,5 +1,7 @@
 #include "core/node_cloud.h"
 
+#include "core/mesh_reader.h"
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -177,6 +179,39 @@ NodeCloud load_node_list(const std::filesystem::path& file) {
   return cloud;
 }
 
+NodeCloud mesh_node_cloud(const Scene& scene) {
+  const TetMesh mesh = read_mesh(scene.distribution.mesh_file);
+  const std::string field = "/body/distribution/file";
+  const BoxSpec& box = scene.box;
+  const Vec3 lo = mesh.positions.rowwise().minCoeff(), hi = mesh.positions.rowwise().maxCoeff();
+  const double tolerance = 1e-6 * (box.max - box.min).norm();
+  auto text = [](const Vec3& v) {
+    std::ostringstream s;
+    s.precision(9);
+    s << '[' << v[0] << ", " << v[1] << ", " << v[2] << ']';
+    return s.str();
+  };
+  const std::string name = scene.distribution.mesh_file.string();
+  if ((lo - box.min).cwiseAbs().maxCoeff() > tolerance || (hi - box.max).cwiseAbs().maxCoeff() > tolerance)
+    throw SceneError(scene.source, field,
+                     "the mesh " + name + " spans " + text(lo) + " ... " + text(hi) + ", not /body/box " +
+                         text(box.min) + " ... " + text(box.max) + ": the mesh must fill the box");
+  const double box_volume = (box.max - box.min).prod();
+  if (std::abs(mesh.total_volume - box_volume) > 1e-6 * box_volume) {
+    std::ostringstream s;
+    s.precision(9);
+    s << "the tetrahedra of " << name << " hold " << mesh.total_volume << " m^3, the box " << box_volume
+      << " m^3 (a hole, an overlap or another shape): the mesh must fill /body/box";
+    throw SceneError(scene.source, field, s.str());
+  }
+  NodeCloud cloud;
+  cloud.positions = mesh.positions;
+  cloud.mesh_volume = mesh.nodal_volume;
+  cloud.mesh_tetrahedra = static_cast<int64_t>(mesh.tetrahedra.size());
+  cloud.mesh_unused_nodes = mesh.unused_nodes;
+  return cloud;
+}
+
 NodeCloud make_node_cloud(const Scene& scene) {
   const DistributionSpec& d = scene.distribution;
   const Eigen::Vector3i per_axis =
@@ -187,6 +222,7 @@ NodeCloud make_node_cloud(const Scene& scene) {
     case DistributionType::graded_grid:
       return graded_grid_nodes(scene.box, per_axis, graded_focus(scene), d.first_spacing);
     case DistributionType::node_file: return load_node_list(d.node_file);
+    case DistributionType::mesh: return mesh_node_cloud(scene);
   }
   throw std::logic_error("make_node_cloud: unknown distribution");
 }

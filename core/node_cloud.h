@@ -1,6 +1,7 @@
 #pragma once
 // Node distributions: where the particles of the meshless solid sit in the
 // reference configuration.
+#include <cstdint>
 #include <filesystem>
 #include <vector>
 
@@ -13,6 +14,10 @@ struct NodeCloud {
   Points positions;                   // 3 x n reference positions X_i, m
   std::vector<double> lattice_volume; // n geometric cell volumes (lattices only; else empty), m^3
   Eigen::Vector3i lattice_size{0, 0, 0};  // nodes per axis for lattices, 0 otherwise
+  // Tetrahedral meshes only (else empty / 0): v_i = a quarter of each incident tetrahedron.
+  std::vector<double> mesh_volume;    // n, m^3
+  int64_t mesh_tetrahedra = 0;        // tetrahedra of the mesh
+  int64_t mesh_unused_nodes = 0;      // nodes of the file used by no tetrahedron (dropped)
 };
 
 // Regular lattice with `per_axis` nodes along each box axis, corners included.
@@ -40,7 +45,13 @@ Vec3 graded_focus(const Scene& scene);
 // skipped. Throws std::runtime_error naming file, line and reason.
 NodeCloud load_node_list(const std::filesystem::path& file);
 
-// The cloud a scene names (grid, jittered_grid or node_file).
+// The vertices of the tetrahedral mesh distribution.mesh_file (core/mesh_reader.h) with
+// their nodal volumes. The mesh must fill the scene's box: its bounding box and the
+// tetrahedra's total volume must equal the box's to 1e-6 (relative), else a SceneError
+// at /body/distribution/file; reader errors are std::runtime_error naming file and line.
+NodeCloud mesh_node_cloud(const Scene& scene);
+
+// The cloud a scene names (grid, jittered_grid, graded_grid, node_file or mesh).
 NodeCloud make_node_cloud(const Scene& scene);
 
 }  // namespace palpate

@@ -5,6 +5,7 @@
 // error is thrown as a SceneError(source, pointer, reason).
 #include "core/scene.h"
 
+#include "core/mesh_reader.h"
 #include "core/node_cloud.h"
 
 #include <algorithm>
@@ -67,11 +68,13 @@ constexpr Named<DistributionType> kDistributions[] = {
     {"jittered_grid", DistributionType::jittered_grid},
     {"graded_grid", DistributionType::graded_grid},
     {"node_file", DistributionType::node_file},
+    {"mesh", DistributionType::mesh},
 };
 
 constexpr Named<VolumeRule> kVolumeRules[] = {
     {"kernel", VolumeRule::kernel},
     {"lattice", VolumeRule::lattice},
+    {"mesh", VolumeRule::mesh},
 };
 
 constexpr Named<IntegratorType> kIntegrators[] = {
@@ -339,8 +342,25 @@ void read_box(const Reader& r, BoxSpec& box) {
   }
 }
 
+// A file named in the scene: relative paths are resolved against base_dir; absolute, normalised.
+fs::path resolve_file(const std::string& name, const fs::path& base_dir) {
+  fs::path p = name;
+  if (p.is_relative()) p = base_dir / p;
+  std::error_code ec;
+  const fs::path abs = fs::absolute(p, ec);
+  return (ec ? p : abs).lexically_normal();
+}
+
+// Requires `file` (the scene's text `name`, resolved) to exist and not be a folder.
+void require_file(const Reader& r, const std::string& what, const std::string& name, const fs::path& file) {
+  std::error_code ec;
+  const auto status = fs::status(file, ec);
+  if (!fs::exists(status)) r.fail(what + " '" + name + "' not found (resolved to " + file.string() + ")");
+  if (fs::is_directory(status)) r.fail(what + " '" + name + "' is a directory (resolved to " + file.string() + ")");
+}
+
 void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base_dir, DistributionSpec& d) {
-  r.object({"type", "per_edge", "spacing", "jitter", "seed", "first_spacing", "focus", "node_file"});
+  r.object({"type", "per_edge", "spacing", "jitter", "seed", "first_spacing", "focus", "node_file", "file"});
   r["type"].get(d.type, "distribution type", kDistributions);
   r["per_edge"].get(d.per_edge, 2, 200);
   r["spacing"].get(d.spacing, at_least(0.0));
@@ -351,10 +371,12 @@ void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base
     r["focus"].get(d.focus);
     d.focus_given = true;
   }
-  std::string node_file;
+  std::string node_file, mesh_file;
   r["node_file"].get(node_file);
+  r["file"].get(mesh_file);
 
-  if (d.spacing > 0.0 && d.type != DistributionType::node_file) {
+  const bool lattice = d.type != DistributionType::node_file && d.type != DistributionType::mesh;
+  if (d.spacing > 0.0 && lattice) {
     constexpr char kAxis[] = "xyz";
     for (int a = 0; a < 3; ++a) {
       const double edge = box.max[a] - box.min[a];
@@ -365,22 +387,25 @@ void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base
     }
   }
 
-  if (!node_file.empty()) {
-    fs::path p = node_file;
-    if (p.is_relative()) p = base_dir / p;
-    std::error_code ec;
-    const fs::path abs = fs::absolute(p, ec);
-    d.node_file = (ec ? p : abs).lexically_normal();
-  }
+  if (!node_file.empty()) d.node_file = resolve_file(node_file, base_dir);
+  if (!mesh_file.empty()) d.mesh_file = resolve_file(mesh_file, base_dir);
   if (d.type == DistributionType::node_file) {
     const Reader f = r["node_file"];
     if (node_file.empty()) f.fail("required when type is 'node_file' (a text file of \"x y z\" lines)");
-    std::error_code ec;
-    const auto status = fs::status(d.node_file, ec);
-    if (!fs::exists(status))
-      f.fail("node file '" + node_file + "' not found (resolved to " + d.node_file.string() + ")");
-    if (fs::is_directory(status))
-      f.fail("node file '" + node_file + "' is a directory (resolved to " + d.node_file.string() + ")");
+    require_file(f, "node file", node_file, d.node_file);
+  }
+  if (d.type == DistributionType::mesh) {
+    const Reader f = r["file"];
+    if (mesh_file.empty())
+      f.fail("required when type is 'mesh' (a tetrahedral mesh: .msh of gmsh, or .node with its .ele of TetGen)");
+    if (!known_mesh_extension(d.mesh_file))
+      f.fail("unknown mesh format '" + d.mesh_file.extension().string() + "' of '" + mesh_file +
+             "' (known: .msh, gmsh 4.1 or 2.2 ASCII; .node with its sibling .ele, TetGen)");
+    require_file(f, "mesh file", mesh_file, d.mesh_file);
+    if (d.mesh_file.extension() == ".node") {
+      const fs::path ele = tetgen_element_file(d.mesh_file);
+      require_file(f, "the TetGen element file of", mesh_file, ele);
+    }
   }
 }
 
@@ -428,6 +453,15 @@ void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
     r["volumes"].fail(
         "'lattice' needs a lattice: a node_file cloud has no lattice cell volumes; use 'kernel' "
         "(or a grid distribution)");
+  // A mesh cloud's volumes are its tetrahedra's, and only a mesh has tetrahedra. Required
+  // rather than defaulted: the wire omits the default ('kernel'), so a default that
+  // depended on the distribution could not be told from an explicit 'kernel'.
+  if (distribution == DistributionType::mesh && m.volumes != VolumeRule::mesh)
+    r["volumes"].fail(std::string("a 'mesh' distribution takes its volumes from the tetrahedra: set \"volumes\": \"mesh\" (got '") +
+                      (m.volumes == VolumeRule::kernel ? "kernel" : "lattice") +
+                      (r["volumes"].present() ? "')" : "', the default)"));
+  if (m.volumes == VolumeRule::mesh && distribution != DistributionType::mesh)
+    r["volumes"].fail("'mesh' volumes need a 'mesh' distribution (tetrahedra); use 'kernel' or 'lattice'");
 }
 
 void read_hex_fem(const Reader& r, HexFemSpec& h) {
@@ -513,6 +547,10 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   r["name"].get(s.name);
   if (const auto* m = r["model"].pick("model", kModels)) s.model = *m;
   read_body(r["body"], base_dir, s);
+  if (s.model == "hex_fem" && s.distribution.type == DistributionType::mesh)
+    r["body"]["distribution"]["type"].fail(
+        "the hex_fem model meshes a lattice with bricks and cannot use a tetrahedral 'mesh' cloud: use a 'grid' or "
+        "'graded_grid' distribution, or the 'mls' model");
   read_mls(r["mls"], s.distribution.type, s.mls);
   read_hex_fem(r["hex_fem"], s.hex_fem);
   if (s.model == "hex_fem" && s.distribution.type != DistributionType::grid &&

@@ -28,8 +28,9 @@ class SceneError : public std::runtime_error {
   std::string source_, field_, reason_;
 };
 
-enum class DistributionType { grid, jittered_grid, graded_grid, node_file };
-enum class VolumeRule { kernel, lattice };  // kernel sums, or lattice cell volumes
+enum class DistributionType { grid, jittered_grid, graded_grid, node_file, mesh };
+// kernel sums, lattice cell volumes, or a quarter of each incident tetrahedron (mesh clouds)
+enum class VolumeRule { kernel, lattice, mesh };
 // Support radius h_i = alpha * (the mean distance to the k neighbours | the k-th neighbour's distance).
 enum class SupportRule { mean_distance, kth_distance };
 // Nodal integration of the MLS gradients as is, or corrected to satisfy the
@@ -64,6 +65,8 @@ struct DistributionSpec {
   uint64_t seed = 1;          // jittered_grid: random seed
   std::filesystem::path node_file;  // node_file: "x y z" per line; holds the absolute path, resolved
                                     // against the scene file's folder
+  std::filesystem::path mesh_file;  // mesh: a tetrahedral mesh (.msh gmsh, .node + .ele TetGen), absolute
+                                    // path resolved like node_file (JSON key "file"; core/mesh_reader.h)
 };
 
 struct MlsSpec {

@@ -31,6 +31,7 @@ enum DistributionType {
   jitteredGrid @1 $Json.name("jittered_grid");
   nodeFile @2 $Json.name("node_file");
   gradedGrid @3 $Json.name("graded_grid");   # geometric lattice graded toward a focus
+  mesh @4;                                   # vertices of a tetrahedral mesh file (Distribution.file)
 }
 enum SupportRule {
   meanDistance @0 $Json.name("mean_distance");  # h = alpha * mean distance to the k neighbours
@@ -43,6 +44,7 @@ enum IntegrationRule {
 enum VolumeRule {
   kernel @0;   # (A-2, A-3) kernel sums
   lattice @1;  # lattice cell volumes
+  mesh @2;     # a quarter of each incident tetrahedron (required by, and only for, mesh clouds)
 }
 enum IntegratorType {
   rk4 @0;
@@ -76,6 +78,8 @@ struct Distribution {
   nodeFile @5 :Text $Json.name("node_file");           # path on the server, relative to --scene-dir
   firstSpacing @6 :Float64 = 0.025 $Json.name("first_spacing");  # graded_grid: spacing at the focus, m
   focus @7 :List(Float64);                             # graded_grid: [x, y, z], m; null = top face under the indenter
+  file @8 :Text;                                       # mesh: .msh (gmsh) or .node (+ .ele, TetGen) on the server,
+                                                       # relative to --scene-dir
 }
 struct Body {
   box @0 :Box;

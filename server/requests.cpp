@@ -9,6 +9,7 @@
 #include <kj/exception.h>
 
 #include "core/hertz.h"
+#include "core/mesh_reader.h"
 #include "protocol/scene_wire.h"
 
 namespace palpate::server {
@@ -33,12 +34,12 @@ bool inside(const fs::path& file, const fs::path& dir) {
   return r == root.end() && f != file.end();
 }
 
-// A client-named node file is read by the simulation thread: only a bounded
+// A client-named node or mesh file is read by the simulation thread: only a bounded
 // regular file inside the server's scene folders (not /dev/zero, a FIFO, or any
-// file whose first line the error message would echo).
-void check_node_file(const Scene& scene, const ServerOptions& options) {
-  const fs::path& file = scene.distribution.node_file;
-  const std::string where = scene.source + ": /body/distribution/node_file: ";
+// file whose first line the error message would echo). `field` is its JSON pointer.
+void check_scene_file(const Scene& scene, const fs::path& file, const std::string& field,
+                      const ServerOptions& options) {
+  const std::string where = scene.source + ": " + field + ": ";
   std::error_code ec, ec_dir;
   const fs::path real = fs::weakly_canonical(file, ec);
   const fs::path default_dir = fs::absolute(options.default_scene, ec_dir).parent_path();
@@ -48,6 +49,25 @@ void check_node_file(const Scene& scene, const ServerOptions& options) {
   const std::uintmax_t bytes = fs::file_size(real, ec);
   if (ec || bytes > kMaxNodeFileBytes)
     fail(where + "'" + file.string() + "' is larger than " + std::to_string(kMaxNodeFileBytes >> 20) + " MiB");
+}
+
+// A mesh cloud (the .msh, or the .node and its .ele) under the same rule, and held
+// to the particle limit by the node count its header declares (read before building).
+void check_mesh_file(const Scene& scene, const ServerOptions& options) {
+  const fs::path& file = scene.distribution.mesh_file;
+  const std::string field = "/body/distribution/file";
+  check_scene_file(scene, file, field, options);
+  if (file.extension() == ".node") check_scene_file(scene, tetgen_element_file(file), field, options);
+  int64_t nodes = 0;
+  try {
+    nodes = declared_mesh_nodes(fs::weakly_canonical(file));
+  } catch (const std::exception& e) {
+    fail(scene.source + ": " + field + ": " + e.what());
+  }
+  if (static_cast<double>(nodes) > options.max_particles)
+    fail(scene.source + ": " + field + ": the mesh declares " + std::to_string(nodes) +
+         " nodes, beyond this server's limit of " + std::to_string(options.max_particles) +
+         " particles (palpate-server --max-particles)");
 }
 
 }  // namespace
@@ -135,7 +155,11 @@ SimConfig session_config(wire::OpenRequest::Reader request, const ServerOptions&
   }
 
   // Bounded memory: refuse lattices beyond the server's particle limit before building.
-  if (const auto& d = config.scene.distribution; d.type != DistributionType::node_file) {
+  if (const auto& d = config.scene.distribution; d.type == DistributionType::node_file) {
+    check_scene_file(config.scene, d.node_file, "/body/distribution/node_file", options);
+  } else if (d.type == DistributionType::mesh) {
+    check_mesh_file(config.scene, options);
+  } else {
     double count = 1.0;
     for (int a = 0; a < 3; ++a) {
       const double edge = config.scene.box.max[a] - config.scene.box.min[a];
@@ -145,8 +169,6 @@ SimConfig session_config(wire::OpenRequest::Reader request, const ServerOptions&
       fail(config.scene.source + ": /body/distribution: " + std::to_string(static_cast<long long>(count)) +
            " particles exceed this server's limit of " + std::to_string(options.max_particles) +
            " (palpate-server --max-particles)");
-  } else {
-    check_node_file(config.scene, options);
   }
   return config;
 }

@@ -26,7 +26,7 @@ struct ServerOptions {
   double max_particles = 200000;        // lattice size refused beyond this (memory bound per session)
 };
 
-// Node files a client may name: regular files of at most this size.
+// Node and mesh files a client may name: regular files of at most this size.
 constexpr std::uintmax_t kMaxNodeFileBytes = 64u << 20;
 
 // An RPC error whose description goes back to the caller as is.
@@ -37,8 +37,9 @@ std::vector<std::string> scene_names(const std::filesystem::path& dir);
 
 // The session an OpenRequest asks for: rate, scene (server default, a plain name
 // under scene_dir, or an inline Scene through the file validator), overrides,
-// the particle limit for lattices, and node files only inside scene_dir or the
-// default scene's folder. The session count limit is the caller's.
+// the particle limit for lattices and meshes (the node count a mesh header declares),
+// and node and mesh files only inside scene_dir or the default scene's folder. The
+// session count limit is the caller's.
 SimConfig session_config(wire::OpenRequest::Reader request, const ServerOptions& options);
 
 // The largest |F| setForce accepts: 100 x the largest verification force, or

@@ -350,11 +350,11 @@ TEST(SceneErrors, BadEnums) {
 
   e = error_of(R"({"body": {"distribution": {"type": "random"}}})");
   EXPECT_EQ(e.field(), "/body/distribution/type");
-  EXPECT_EQ(e.reason(), "unknown distribution type 'random' (known: grid, jittered_grid, graded_grid, node_file)");
+  EXPECT_EQ(e.reason(), "unknown distribution type 'random' (known: grid, jittered_grid, graded_grid, node_file, mesh)");
 
   e = error_of(R"({"mls": {"volumes": "voronoi"}})");
   EXPECT_EQ(e.field(), "/mls/volumes");
-  EXPECT_EQ(e.reason(), "unknown volume rule 'voronoi' (known: kernel, lattice)");
+  EXPECT_EQ(e.reason(), "unknown volume rule 'voronoi' (known: kernel, lattice, mesh)");
 
   e = error_of(R"({"model": "fem"})");
   EXPECT_EQ(e.field(), "/model");

@@ -33,6 +33,14 @@ class ServerRequests : public ::testing::Test {
     std::ofstream nodes(dir_ / "scenes" / "nodes.txt");
     for (int k = 0; k < 8; ++k) nodes << (k & 1) << ' ' << (k >> 1 & 1) << ' ' << (k >> 2 & 1) - 1 << '\n';
     std::ofstream(dir_ / "outside.txt") << "0 0 0\n";
+    // A TetGen cube (the six Kuhn tetrahedra) inside the scene folder, and copies outside it.
+    std::ofstream node(dir_ / "scenes" / "cube.node");
+    node << "8 3 0 0\n";
+    for (int k = 0; k < 8; ++k) node << k << ' ' << (k & 1) << ' ' << (k >> 1 & 1) << ' ' << (k >> 2 & 1) - 1 << '\n';
+    node.close();
+    std::ofstream(dir_ / "scenes" / "cube.ele") << "6 4 0\n0 0 1 3 7\n1 0 5 1 7\n2 0 3 2 7\n3 0 2 6 7\n4 0 4 5 7\n5 0 6 4 7\n";
+    fs::copy_file(dir_ / "scenes" / "cube.node", dir_ / "outside.node");
+    fs::copy_file(dir_ / "scenes" / "cube.ele", dir_ / "outside.ele");
   }
   void TearDown() override { fs::remove_all(dir_); }
 
@@ -43,6 +51,23 @@ class ServerRequests : public ::testing::Test {
     auto d = request.getScene().initInlineScene().initBody().initDistribution();
     d.setType(wire::DistributionType::NODE_FILE);
     d.setNodeFile(file);
+    try {
+      session_config(request, options_);
+    } catch (const kj::Exception& e) {
+      return e.getDescription().cStr();
+    }
+    return "";
+  }
+
+  // The same for a "mesh" distribution naming `file`.
+  std::string open_mesh(const std::string& file) {
+    capnp::MallocMessageBuilder mb;
+    auto request = mb.initRoot<wire::OpenRequest>();
+    auto scene = request.getScene().initInlineScene();
+    auto d = scene.initBody().initDistribution();
+    d.setType(wire::DistributionType::MESH);
+    d.setFile(file);
+    scene.initMls().setVolumes(wire::VolumeRule::MESH);
     try {
       session_config(request, options_);
     } catch (const kj::Exception& e) {
@@ -75,6 +100,33 @@ TEST_F(ServerRequests, NodeFileThatIsNotARegularFileIsRefused) {
   EXPECT_TRUE(contains(open_node_file("zero.txt"), "outside the server's scene folder"));
   ASSERT_EQ(mkfifo((dir_ / "scenes" / "fifo.txt").c_str(), 0600), 0);
   EXPECT_TRUE(contains(open_node_file("fifo.txt"), "is not a regular file"));
+}
+
+TEST_F(ServerRequests, MeshFileInsideTheSceneFolderIsAccepted) {
+  EXPECT_EQ(open_mesh("cube.node"), "");
+  EXPECT_EQ(open_mesh((dir_ / "scenes" / "cube.node").string()), "");
+}
+
+TEST_F(ServerRequests, MeshFileOutsideTheSceneFolderIsRefused) {
+  const std::string e = open_mesh("../outside.node");
+  EXPECT_TRUE(contains(e, "/body/distribution/file")) << e;
+  EXPECT_TRUE(contains(e, "outside the server's scene folder")) << e;
+  // A .node inside whose .ele leads outside.
+  fs::copy_file(dir_ / "scenes" / "cube.node", dir_ / "scenes" / "linked.node");
+  fs::create_symlink(dir_ / "outside.ele", dir_ / "scenes" / "linked.ele");
+  const std::string linked = open_mesh("linked.node");
+  EXPECT_TRUE(contains(linked, "linked.ele' is outside the server's scene folder")) << linked;
+}
+
+TEST_F(ServerRequests, MeshBeyondTheParticleLimitIsRefusedBeforeItIsRead) {
+  options_.max_particles = 7;
+  const std::string e = open_mesh("cube.node");
+  EXPECT_TRUE(contains(e, "/body/distribution/file: the mesh declares 8 nodes, beyond this server's limit")) << e;
+  options_.max_particles = 8;
+  EXPECT_EQ(open_mesh("cube.node"), "");
+  std::ofstream(dir_ / "scenes" / "bad.msh") << "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 many\n";
+  const std::string bad = open_mesh("bad.msh");
+  EXPECT_TRUE(contains(bad, "bad.msh:5: numNodes: expected an integer, got 'many'")) << bad;
 }
 
 TEST_F(ServerRequests, OverridesCannotPointANamedSceneElsewhere) {

@@ -68,6 +68,25 @@ TEST(SceneWire, SceneFileRoundTripsThroughTheWire) {
   EXPECT_EQ(wire.fixed_faces, file.fixed_faces);
 }
 
+// The mesh distribution (Distribution.file, VolumeRule mesh): JSON -> wire -> JSON
+// keeps the file name and the volume rule.
+TEST(SceneWire, MeshDistributionRoundTrips) {
+  const std::string text = R"({"body": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]},
+      "distribution": {"type": "mesh", "file": "cube_tet_small.msh"}}, "mls": {"volumes": "mesh"}})";
+  capnp::MallocMessageBuilder mb;
+  auto scene = mb.initRoot<wire::Scene>();
+  scene_json_to_wire(text, "mesh.json", scene);
+  EXPECT_EQ(scene.getBody().getDistribution().getType(), wire::DistributionType::MESH);
+  EXPECT_EQ(std::string(scene.getBody().getDistribution().getFile().cStr()), "cube_tet_small.msh");
+  EXPECT_EQ(scene.getMls().getVolumes(), wire::VolumeRule::MESH);
+  const std::string json = scene_to_json(scene);
+  EXPECT_NE(json.find("\"file\":\"cube_tet_small.msh\""), std::string::npos) << json;
+  const Scene s = scene_from_wire(scene, "<rpc scene>", PALPATE_SOURCE_DIR "/tests/data");
+  EXPECT_EQ(s.distribution.type, DistributionType::mesh);
+  EXPECT_EQ(s.mls.volumes, VolumeRule::mesh);
+  EXPECT_EQ(s.distribution.mesh_file.filename(), "cube_tet_small.msh");
+}
+
 TEST(SceneWire, ErrorsNameTheField) {
   capnp::MallocMessageBuilder mb;
   auto scene = mb.initRoot<wire::Scene>();

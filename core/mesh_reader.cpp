@@ -1,0 +1,629 @@
+// Tetrahedral mesh files -> node positions, tetrahedra and nodal volumes (mesh_reader.h).
+//
+// Both formats are read by one whitespace tokenizer that knows the line of every
+// token (for messages) and, for TetGen, skips '#' comments. Node references are
+// resolved after the whole file is read; the tetrahedra are then checked
+// (degenerate, inverted), the unused nodes dropped and the volumes lumped.
+#include "core/mesh_reader.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+
+namespace palpate {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Coordinates beyond this are refused: volumes of larger values could overflow.
+constexpr double kMaxCoordinate = 1e12;  // m
+// A tetrahedron is degenerate when |V| <= kDegenerate * L^3 (a regular one has 0.118 L^3).
+constexpr double kDegenerate = 1e-12;
+
+std::string fmt(double x) {
+  std::ostringstream s;
+  s.precision(6);
+  s << x;
+  return s.str();
+}
+
+// The text of a token for a message: at most 40 bytes, control bytes escaped.
+std::string quoted(std::string_view token) {
+  std::string out = "'";
+  for (size_t i = 0; i < token.size() && i < 40; ++i) {
+    const unsigned char c = static_cast<unsigned char>(token[i]);
+    if (c >= 0x20 && c < 0x7f) {
+      out += static_cast<char>(c);
+    } else {
+      static constexpr char kHex[] = "0123456789abcdef";
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    }
+  }
+  if (token.size() > 40) out += "...";
+  return out + "'";
+}
+
+std::string read_text(const fs::path& file, const char* what) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw std::runtime_error(file.string() + ": cannot open " + what);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw std::runtime_error(file.string() + ": cannot read " + what);
+  return text;
+}
+
+// Whitespace-separated tokens with their line numbers.
+class Lexer {
+ public:
+  Lexer(std::string text, std::string file, bool hash_comments)
+      : text_(std::move(text)), file_(std::move(file)), hash_comments_(hash_comments) {}
+
+  // The next token, or false at the end of the input.
+  bool next(std::string_view& token) {
+    skip_space();
+    if (pos_ >= text_.size()) {
+      token_line_ = line_;
+      return false;
+    }
+    const size_t start = pos_;
+    while (pos_ < text_.size() && !is_space(text_[pos_]) && !(hash_comments_ && text_[pos_] == '#')) ++pos_;
+    token = std::string_view(text_).substr(start, pos_ - start);
+    token_line_ = line_;
+    return true;
+  }
+
+  // The next token, which must exist: `what` says what was expected.
+  std::string_view expect(const std::string& what) {
+    std::string_view token;
+    if (!next(token)) fail("unexpected end of file, expected " + what);
+    return token;
+  }
+
+  // True if another token follows on the line of the last token.
+  bool more_on_line() {
+    skip_space(/*stop_at_newline=*/true);
+    return pos_ < text_.size() && text_[pos_] != '\n';
+  }
+  // Requires the line of the last token to end here.
+  void end_of_line(const std::string& what) {
+    if (more_on_line()) {
+      std::string_view extra;
+      next(extra);
+      token_line_ = line_;
+      fail("unexpected " + quoted(extra) + " after " + what);
+    }
+  }
+  // Skips the rest of the current line.
+  void skip_line() {
+    while (pos_ < text_.size() && text_[pos_] != '\n') ++pos_;
+  }
+
+  int64_t integer(const std::string& what, int64_t lo, int64_t hi) {
+    const std::string_view t = expect(what);
+    std::string_view digits = t;
+    if (!digits.empty() && digits[0] == '+') digits.remove_prefix(1);
+    int64_t value = 0;
+    const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    if (ec != std::errc() || end != digits.data() + digits.size() || digits.empty())
+      fail(what + ": expected an integer, got " + quoted(t));
+    if (value < lo || value > hi)
+      fail(what + ": must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + std::to_string(value));
+    return value;
+  }
+
+  double real(const std::string& what) {
+    const std::string_view t = expect(what);
+    std::string_view digits = t;
+    if (!digits.empty() && digits[0] == '+') digits.remove_prefix(1);
+    double value = 0;
+    const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    if (ec == std::errc::result_out_of_range) fail(what + ": " + quoted(t) + " is out of range");
+    if (ec != std::errc() || end != digits.data() + digits.size() || digits.empty())
+      fail(what + ": expected a number, got " + quoted(t));
+    if (!std::isfinite(value)) fail(what + ": must be a finite number, got " + quoted(t));
+    if (std::abs(value) > kMaxCoordinate) fail(what + ": |" + quoted(t) + "| exceeds " + fmt(kMaxCoordinate));
+    return value;
+  }
+
+  int line() const { return token_line_; }
+  const std::string& file() const { return file_; }
+
+  [[noreturn]] void fail(const std::string& reason) const { fail_at(token_line_, reason); }
+  [[noreturn]] void fail_at(int line, const std::string& reason) const {
+    throw std::runtime_error(file_ + ":" + std::to_string(line) + ": " + reason);
+  }
+
+ private:
+  static bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
+  void skip_space(bool stop_at_newline = false) {
+    while (pos_ < text_.size()) {
+      const char c = text_[pos_];
+      if (c == '\n') {
+        if (stop_at_newline) return;
+        ++line_;
+        ++pos_;
+      } else if (is_space(c)) {
+        ++pos_;
+      } else if (hash_comments_ && c == '#') {
+        skip_line();
+      } else {
+        return;
+      }
+    }
+  }
+
+  std::string text_;
+  std::string file_;
+  bool hash_comments_;
+  size_t pos_ = 0;
+  int line_ = 1;
+  int token_line_ = 1;
+};
+
+[[noreturn]] void fail_at(const std::string& file, int line, const std::string& reason) {
+  throw std::runtime_error(file + ":" + std::to_string(line) + ": " + reason);
+}
+
+// What both readers collect before the mesh is checked and assembled.
+struct RawMesh {
+  std::vector<Vec3> nodes;
+  std::vector<int> node_line;                  // line of each node, for messages
+  std::vector<std::array<int64_t, 4>> tets;    // node indices into `nodes` (resolved)
+  std::vector<int> tet_line;
+  std::vector<int64_t> tet_tag;                // the element's number in the file
+  int64_t ignored_elements = 0;
+};
+
+// Checks the tetrahedra, drops unused nodes, lumps the volumes. Messages name
+// `node_file` or `element_file` (the same file for gmsh).
+TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& element_file,
+                 const std::string& what_if_empty) {
+  if (raw.tets.empty()) throw std::runtime_error(element_file + ": " + what_if_empty);
+  TetMesh mesh;
+  mesh.ignored_elements = raw.ignored_elements;
+  const size_t node_count = raw.nodes.size();
+  std::vector<double> volume(raw.tets.size());
+  int first_sign = 0;
+  for (size_t t = 0; t < raw.tets.size(); ++t) {
+    const auto& tet = raw.tets[t];
+    const std::string name = "tetrahedron " + std::to_string(raw.tet_tag[t]);
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b)
+        if (tet[a] == tet[b])
+          fail_at(element_file, raw.tet_line[t], name + " uses the node at line " + std::to_string(raw.node_line[tet[a]]) +
+                                           " twice (degenerate)");
+    const Vec3& x0 = raw.nodes[tet[0]];
+    const Vec3 e1 = raw.nodes[tet[1]] - x0, e2 = raw.nodes[tet[2]] - x0, e3 = raw.nodes[tet[3]] - x0;
+    const double V = e1.dot(e2.cross(e3)) / 6.0;  // signed volume
+    double L2 = std::max({e1.squaredNorm(), e2.squaredNorm(), e3.squaredNorm()});
+    for (int a = 1; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) L2 = std::max(L2, (raw.nodes[tet[a]] - raw.nodes[tet[b]]).squaredNorm());
+    const double L = std::sqrt(L2);
+    if (!(std::abs(V) > kDegenerate * L * L * L))
+      fail_at(element_file, raw.tet_line[t], name + " is degenerate: volume " + fmt(V) + " m^3 with longest edge " + fmt(L) +
+                                       " m (|V| must exceed 1e-12 L^3)");
+    const int sign = V > 0 ? 1 : -1;
+    if (first_sign == 0) first_sign = sign;
+    if (sign != first_sign)
+      fail_at(element_file, raw.tet_line[t], name + " is inverted: volume " + fmt(V) + " m^3, the opposite sign of the file's first tetrahedron (line " +
+                                       std::to_string(raw.tet_line[0]) + "); the mesh is tangled or inconsistently oriented");
+    volume[t] = std::abs(V);
+  }
+  mesh.reoriented = first_sign < 0;
+
+  // Keep the nodes some tetrahedron uses, in file order.
+  std::vector<int64_t> new_index(node_count, -1);
+  for (const auto& tet : raw.tets)
+    for (int64_t v : tet) new_index[v] = 0;
+  int64_t kept = 0;
+  for (size_t i = 0; i < node_count; ++i)
+    if (new_index[i] == 0) new_index[i] = kept++;
+  mesh.unused_nodes = static_cast<int64_t>(node_count) - kept;
+  mesh.positions.resize(3, kept);
+  std::vector<int> kept_line(kept);
+  for (size_t i = 0; i < node_count; ++i)
+    if (new_index[i] >= 0) {
+      mesh.positions.col(new_index[i]) = raw.nodes[i];
+      kept_line[new_index[i]] = raw.node_line[i];
+    }
+
+  // Coincident nodes would make a crack (two tetrahedra sharing a point but not a node)
+  // and a zero particle spacing.
+  std::vector<int64_t> order(kept);
+  for (int64_t i = 0; i < kept; ++i) order[i] = i;
+  const Points& X = mesh.positions;
+  auto less = [&X](int64_t a, int64_t b) {
+    for (int c = 0; c < 3; ++c)
+      if (X(c, a) != X(c, b)) return X(c, a) < X(c, b);
+    return a < b;
+  };
+  std::sort(order.begin(), order.end(), less);
+  for (int64_t k = 1; k < kept; ++k)
+    if (X.col(order[k]) == X.col(order[k - 1])) {
+      const int64_t a = std::min(order[k], order[k - 1]), b = std::max(order[k], order[k - 1]);
+      fail_at(node_file, kept_line[b], "this node coincides with the node at line " + std::to_string(kept_line[a]) + " (" +
+                                    fmt(X(0, a)) + ", " + fmt(X(1, a)) + ", " + fmt(X(2, a)) + ")");
+    }
+
+  // Tetrahedra, positively oriented, and the lumped volumes v_i = sum_t |V_t| / 4.
+  mesh.tetrahedra.resize(raw.tets.size());
+  mesh.nodal_volume.assign(kept, 0.0);
+  for (size_t t = 0; t < raw.tets.size(); ++t) {
+    std::array<int, 4> tet;
+    for (int a = 0; a < 4; ++a) tet[a] = static_cast<int>(new_index[raw.tets[t][a]]);
+    if (mesh.reoriented) std::swap(tet[1], tet[2]);
+    mesh.tetrahedra[t] = tet;
+    for (int v : tet) mesh.nodal_volume[v] += 0.25 * volume[t];
+    mesh.total_volume += volume[t];
+  }
+  return mesh;
+}
+
+// ---------------------------------------------------------------------------
+// gmsh
+
+enum class GmshVersion { none, v2, v41 };
+
+// $MeshFormat: "version file-type data-size" and $EndMeshFormat.
+GmshVersion read_mesh_format(Lexer& lex) {
+  const std::string_view version = lex.expect("the format version");
+  const int version_line = lex.line();
+  GmshVersion v;
+  if (version == "4.1") {
+    v = GmshVersion::v41;
+  } else if (version == "2.2" || version == "2.1" || version == "2" || version == "2.0") {
+    v = GmshVersion::v2;
+  } else if (version == "4" || version == "4.0") {
+    lex.fail("gmsh format 4.0 is not supported: save the mesh as 4.1 or 2.2 ASCII (gmsh -format msh41 or msh22)");
+  } else {
+    lex.fail("unknown gmsh format version " + quoted(version) + " (known: 4.1, 2.2)");
+  }
+  const int64_t file_type = lex.integer("file-type", 0, 1);
+  if (file_type != 0)
+    lex.fail_at(version_line, "binary .msh files are not supported: save the mesh as ASCII (gmsh option Mesh.Binary = 0)");
+  lex.integer("data-size", 1, 16);
+  if (lex.expect("$EndMeshFormat") != "$EndMeshFormat") lex.fail("expected $EndMeshFormat");
+  return v;
+}
+
+// Node tag -> index into raw.nodes (tags are positive and unique).
+struct NodeTags {
+  std::unordered_map<int64_t, int64_t> index;
+  void add(Lexer& lex, int64_t tag, RawMesh& raw) {
+    const auto [it, fresh] = index.emplace(tag, static_cast<int64_t>(raw.nodes.size()));
+    if (!fresh)
+      lex.fail("node tag " + std::to_string(tag) + " appears twice (first at line " +
+               std::to_string(raw.node_line[it->second]) + ")");
+  }
+};
+
+constexpr int64_t kMaxTag = std::numeric_limits<int64_t>::max() / 2;
+
+Vec3 read_xyz(Lexer& lex) {
+  Vec3 p;
+  p[0] = lex.real("x");
+  p[1] = lex.real("y");
+  p[2] = lex.real("z");
+  return p;
+}
+
+void read_nodes_v41(Lexer& lex, RawMesh& raw, NodeTags& tags, int64_t max_nodes) {
+  const int64_t blocks = lex.integer("numEntityBlocks", 0, kMaxTag);
+  const int64_t count = lex.integer("numNodes", 0, kMaxTag);
+  if (count > max_nodes)
+    lex.fail(std::to_string(count) + " nodes exceed the limit of " + std::to_string(max_nodes));
+  lex.integer("minNodeTag", 0, kMaxTag);
+  lex.integer("maxNodeTag", 0, kMaxTag);
+  int64_t read = 0;
+  for (int64_t b = 0; b < blocks; ++b) {
+    const int64_t dim = lex.integer("entityDim", 0, 3);
+    lex.integer("entityTag", -kMaxTag, kMaxTag);
+    const int64_t parametric = lex.integer("parametric", 0, 1);
+    const int64_t in_block = lex.integer("numNodesInBlock", 0, kMaxTag);
+    if (in_block > count - read)
+      lex.fail("the node blocks hold more than the " + std::to_string(count) + " nodes the $Nodes header declares");
+    const size_t first = raw.nodes.size();
+    for (int64_t k = 0; k < in_block; ++k) {
+      const int64_t tag = lex.integer("nodeTag", 1, kMaxTag);
+      tags.add(lex, tag, raw);
+      raw.nodes.emplace_back(Vec3::Zero());
+      raw.node_line.push_back(lex.line());
+    }
+    for (int64_t k = 0; k < in_block; ++k) {
+      const Vec3 p = read_xyz(lex);
+      raw.node_line[first + k] = lex.line();  // messages point at the coordinates
+      raw.nodes[first + k] = p;
+      if (parametric)
+        for (int64_t u = 0; u < dim; ++u) lex.real("parametric coordinate");
+    }
+    read += in_block;
+  }
+  if (read != count)
+    lex.fail("the node blocks hold " + std::to_string(read) + " nodes, the $Nodes header says " + std::to_string(count));
+}
+
+void read_nodes_v2(Lexer& lex, RawMesh& raw, NodeTags& tags, int64_t max_nodes) {
+  const int64_t count = lex.integer("number-of-nodes", 0, kMaxTag);
+  if (count > max_nodes)
+    lex.fail(std::to_string(count) + " nodes exceed the limit of " + std::to_string(max_nodes));
+  for (int64_t k = 0; k < count; ++k) {
+    const int64_t tag = lex.integer("node-number", 1, kMaxTag);
+    tags.add(lex, tag, raw);
+    raw.nodes.push_back(read_xyz(lex));
+    raw.node_line.push_back(lex.line());
+    lex.end_of_line("a node's x y z");
+  }
+}
+
+// A 4-node tetrahedron's node tags (gmsh); resolved later.
+struct GmshTet {
+  int64_t tag;
+  std::array<int64_t, 4> nodes;
+  int line;
+};
+
+void read_tet_nodes(Lexer& lex, int64_t tag, std::vector<GmshTet>& tets) {
+  GmshTet t{tag, {}, 0};
+  for (int a = 0; a < 4; ++a) t.nodes[a] = lex.integer("nodeTag", 1, kMaxTag);
+  t.line = lex.line();
+  lex.end_of_line("the four nodes of a tetrahedron");
+  tets.push_back(t);
+}
+
+constexpr int kGmshTetrahedron = 4;  // gmsh element type of the 4-node tetrahedron
+
+void read_elements_v41(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
+  const int64_t blocks = lex.integer("numEntityBlocks", 0, kMaxTag);
+  const int64_t count = lex.integer("numElements", 0, kMaxTag);
+  lex.integer("minElementTag", 0, kMaxTag);
+  lex.integer("maxElementTag", 0, kMaxTag);
+  int64_t read = 0;
+  for (int64_t b = 0; b < blocks; ++b) {
+    lex.integer("entityDim", 0, 3);
+    lex.integer("entityTag", -kMaxTag, kMaxTag);
+    const int64_t type = lex.integer("elementType", 1, 1000);
+    const int64_t in_block = lex.integer("numElementsInBlock", 0, kMaxTag);
+    if (in_block > count - read)
+      lex.fail("the element blocks hold more than the " + std::to_string(count) +
+               " elements the $Elements header declares");
+    lex.end_of_line("an element block header");
+    for (int64_t k = 0; k < in_block; ++k) {
+      const int64_t tag = lex.integer("elementTag", 1, kMaxTag);
+      if (type == kGmshTetrahedron) {
+        read_tet_nodes(lex, tag, tets);
+      } else {  // one element per line: its node count need not be known
+        lex.skip_line();
+        ++raw.ignored_elements;
+      }
+    }
+    read += in_block;
+  }
+  if (read != count)
+    lex.fail("the element blocks hold " + std::to_string(read) + " elements, the $Elements header says " +
+             std::to_string(count));
+}
+
+void read_elements_v2(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
+  const int64_t count = lex.integer("number-of-elements", 0, kMaxTag);
+  for (int64_t k = 0; k < count; ++k) {
+    const int64_t tag = lex.integer("elm-number", 1, kMaxTag);
+    const int64_t type = lex.integer("elm-type", 1, 1000);
+    const int64_t tag_count = lex.integer("number-of-tags", 0, 1000);
+    if (type != kGmshTetrahedron) {
+      lex.skip_line();
+      ++raw.ignored_elements;
+      continue;
+    }
+    for (int64_t t = 0; t < tag_count; ++t) lex.integer("tag", -kMaxTag, kMaxTag);
+    read_tet_nodes(lex, tag, tets);
+  }
+}
+
+// Reads "$End<name>" after a section's content.
+void expect_end(Lexer& lex, std::string_view name) {
+  const std::string end = "$End" + std::string(name);
+  const std::string_view token = lex.expect(end);
+  if (token != end) lex.fail("expected " + end + ", got " + quoted(token));
+}
+
+// Skips an unknown section up to its "$End<name>".
+void skip_section(Lexer& lex, std::string_view name) {
+  const std::string end = "$End" + std::string(name);
+  const int start = lex.line();
+  std::string_view token;
+  while (lex.next(token))
+    if (token == end) return;
+  lex.fail_at(start, "section $" + std::string(name) + " is not closed by " + end);
+}
+
+// The section name of a "$Name" token.
+std::string_view section_name(Lexer& lex, std::string_view token) {
+  if (token.size() < 2 || token[0] != '$') lex.fail("expected a section such as $Nodes, got " + quoted(token));
+  return token.substr(1);
+}
+
+}  // namespace
+
+TetMesh read_gmsh(const fs::path& file, int64_t max_nodes) {
+  Lexer lex(read_text(file, "gmsh mesh"), file.string(), false);
+  RawMesh raw;
+  NodeTags tags;
+  std::vector<GmshTet> tets;
+  GmshVersion version = GmshVersion::none;
+  bool nodes_seen = false, elements_seen = false;
+  std::string_view token;
+  while (lex.next(token)) {
+    if (version == GmshVersion::none && token != "$MeshFormat")
+      lex.fail("the file must start with $MeshFormat (is it a gmsh .msh file?), got " + quoted(token));
+    const std::string_view name = section_name(lex, token);
+    if (name == "MeshFormat") {
+      if (version != GmshVersion::none) lex.fail("a second $MeshFormat section");
+      version = read_mesh_format(lex);
+    } else if (name == "Nodes") {
+      if (nodes_seen) lex.fail("a second $Nodes section");
+      nodes_seen = true;
+      if (version == GmshVersion::v41) read_nodes_v41(lex, raw, tags, max_nodes);
+      else read_nodes_v2(lex, raw, tags, max_nodes);
+      expect_end(lex, name);
+    } else if (name == "Elements") {
+      if (elements_seen) lex.fail("a second $Elements section");
+      elements_seen = true;
+      if (version == GmshVersion::v41) read_elements_v41(lex, raw, tets);
+      else read_elements_v2(lex, raw, tets);
+      expect_end(lex, name);
+    } else {
+      skip_section(lex, name);
+    }
+  }
+  if (version == GmshVersion::none) throw std::runtime_error(file.string() + ": empty file, expected a gmsh mesh");
+  if (!nodes_seen) throw std::runtime_error(file.string() + ": no $Nodes section");
+  if (!elements_seen) throw std::runtime_error(file.string() + ": no $Elements section");
+
+  raw.tets.reserve(tets.size());
+  for (const GmshTet& t : tets) {
+    std::array<int64_t, 4> nodes;
+    for (int a = 0; a < 4; ++a) {
+      const auto it = tags.index.find(t.nodes[a]);
+      if (it == tags.index.end())
+        lex.fail_at(t.line, "tetrahedron " + std::to_string(t.tag) + ": node tag " + std::to_string(t.nodes[a]) +
+                                " is not in $Nodes");
+      nodes[a] = it->second;
+    }
+    raw.tets.push_back(nodes);
+    raw.tet_line.push_back(t.line);
+    raw.tet_tag.push_back(t.tag);
+  }
+  const std::string none =
+      "no 4-node tetrahedra (element type 4) in $Elements, " + std::to_string(raw.ignored_elements) +
+      " other elements (a volume mesh of order 1 is needed: gmsh -3 -order 1)";
+  return assemble(std::move(raw), file.string(), file.string(), none);
+}
+
+fs::path tetgen_element_file(const fs::path& node_file) {
+  fs::path ele = node_file;
+  return ele.replace_extension(".ele");
+}
+
+TetMesh read_tetgen(const fs::path& node_file, int64_t max_nodes) {
+  RawMesh raw;
+  int64_t base = 0;
+  {
+    Lexer lex(read_text(node_file, "TetGen .node file"), node_file.string(), true);
+    const int64_t count = lex.integer("number of points", 1, kMaxTag);
+    if (count > max_nodes)
+      lex.fail(std::to_string(count) + " nodes exceed the limit of " + std::to_string(max_nodes));
+    const int header_line = lex.line();
+    int64_t attributes = 0, markers = 0;
+    if (!lex.more_on_line()) lex.fail("the header needs the dimension: \"<points> 3 <attributes> <markers>\"");
+    lex.integer("dimension", 3, 3);
+    if (lex.more_on_line()) attributes = lex.integer("number of attributes", 0, 1000);
+    if (lex.more_on_line()) markers = lex.integer("number of boundary markers", 0, 1);
+    lex.end_of_line("the .node header");
+    for (int64_t k = 0; k < count; ++k) {
+      const int64_t index = lex.integer("point index", -kMaxTag, kMaxTag);
+      if (lex.line() == header_line) lex.fail("expected the first point on a new line");
+      if (k == 0) {
+        if (index != 0 && index != 1) lex.fail("the first point index must be 0 or 1, got " + std::to_string(index));
+        base = index;
+      } else if (index != base + k) {
+        lex.fail("point index " + std::to_string(index) + " where " + std::to_string(base + k) +
+                 " was expected (indices must be consecutive)");
+      }
+      raw.nodes.push_back(read_xyz(lex));
+      raw.node_line.push_back(lex.line());
+      for (int64_t a = 0; a < attributes; ++a) lex.real("attribute");
+      for (int64_t a = 0; a < markers; ++a) lex.integer("boundary marker", -kMaxTag, kMaxTag);
+      lex.end_of_line("a point (index, x, y, z, " + std::to_string(attributes) + " attributes, " +
+                      std::to_string(markers) + " markers)");
+    }
+    std::string_view extra;
+    if (lex.next(extra)) lex.fail("unexpected " + quoted(extra) + " after the " + std::to_string(count) + " points");
+  }
+
+  const fs::path ele_file = tetgen_element_file(node_file);
+  Lexer lex(read_text(ele_file, "TetGen .ele file (the .node file's sibling)"), ele_file.string(), true);
+  const int64_t count = lex.integer("number of tetrahedra", 1, kMaxTag);
+  const int header_line = lex.line();
+  const int64_t per_tet = lex.integer("nodes per tetrahedron", 4, 10);
+  if (per_tet != 4 && per_tet != 10) lex.fail("nodes per tetrahedron: must be 4 or 10, got " + std::to_string(per_tet));
+  int64_t attributes = 0;
+  if (lex.more_on_line()) attributes = lex.integer("number of region attributes", 0, 1000);
+  lex.end_of_line("the .ele header");
+  const int64_t node_count = static_cast<int64_t>(raw.nodes.size());
+  for (int64_t k = 0; k < count; ++k) {
+    const int64_t tag = lex.integer("tetrahedron index", -kMaxTag, kMaxTag);
+    if (lex.line() == header_line) lex.fail("expected the first tetrahedron on a new line");
+    std::array<int64_t, 4> nodes;
+    for (int64_t a = 0; a < per_tet; ++a) {
+      const int64_t v = lex.integer("node index", -kMaxTag, kMaxTag);
+      if (v < base || v >= base + node_count)
+        lex.fail("tetrahedron " + std::to_string(tag) + ": node index " + std::to_string(v) + " is out of range [" +
+                 std::to_string(base) + ", " + std::to_string(base + node_count - 1) + "]");
+      if (a < 4) nodes[a] = v - base;  // a 10-node tetrahedron's corners come first
+    }
+    for (int64_t a = 0; a < attributes; ++a) lex.real("region attribute");
+    raw.tets.push_back(nodes);
+    raw.tet_line.push_back(lex.line());
+    raw.tet_tag.push_back(tag);
+    lex.end_of_line("a tetrahedron (index, " + std::to_string(per_tet) + " nodes, " + std::to_string(attributes) +
+                    " attributes)");
+  }
+  std::string_view extra;
+  if (lex.next(extra)) lex.fail("unexpected " + quoted(extra) + " after the " + std::to_string(count) + " tetrahedra");
+  return assemble(std::move(raw), node_file.string(), ele_file.string(), "no tetrahedra");
+}
+
+bool known_mesh_extension(const fs::path& file) {
+  const std::string ext = file.extension().string();
+  return ext == ".msh" || ext == ".node";
+}
+
+TetMesh read_mesh(const fs::path& file, int64_t max_nodes) {
+  const std::string ext = file.extension().string();
+  if (ext == ".msh") return read_gmsh(file, max_nodes);
+  if (ext == ".node") return read_tetgen(file, max_nodes);
+  throw std::runtime_error(file.string() + ": unknown mesh format '" + ext +
+                           "' (known: .msh, gmsh 4.1 or 2.2 ASCII; .node with its .ele, TetGen)");
+}
+
+int64_t declared_mesh_nodes(const fs::path& file) {
+  const std::string ext = file.extension().string();
+  if (ext == ".node") {
+    Lexer lex(read_text(file, "TetGen .node file"), file.string(), true);
+    return lex.integer("number of points", 1, kMaxTag);
+  }
+  if (ext != ".msh")
+    throw std::runtime_error(file.string() + ": unknown mesh format '" + ext + "' (known: .msh, .node)");
+  Lexer lex(read_text(file, "gmsh mesh"), file.string(), false);
+  GmshVersion version = GmshVersion::none;
+  std::string_view token;
+  while (lex.next(token)) {
+    if (version == GmshVersion::none && token != "$MeshFormat")
+      lex.fail("the file must start with $MeshFormat (is it a gmsh .msh file?), got " + quoted(token));
+    const std::string_view name = section_name(lex, token);
+    if (name == "MeshFormat") {
+      if (version != GmshVersion::none) lex.fail("a second $MeshFormat section");
+      version = read_mesh_format(lex);
+    } else if (name == "Nodes") {
+      if (version == GmshVersion::v2) return lex.integer("number-of-nodes", 0, kMaxTag);
+      lex.integer("numEntityBlocks", 0, kMaxTag);
+      return lex.integer("numNodes", 0, kMaxTag);
+    } else {
+      skip_section(lex, name);
+    }
+  }
+  throw std::runtime_error(file.string() + ": no $Nodes section");
+}
+
+}  // namespace palpate

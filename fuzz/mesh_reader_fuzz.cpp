@@ -1,0 +1,98 @@
+// libFuzzer target: the tetrahedral mesh readers (core/mesh_reader.h). The first
+// byte picks the format: even = gmsh .msh (the rest of the input is the file), odd
+// = TetGen (the rest is the .node text, a NUL byte, then the .ele text). The input
+// is written to private temporary files (the readers take paths). The contract: a
+// mesh whose positions are finite, whose tetrahedra index its nodes and are
+// positively oriented, whose nodal volumes are positive and sum to its volume,
+// and whose header declares at least its nodes; or a std::runtime_error.
+#include <unistd.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+
+#include "core/mesh_reader.h"
+
+namespace {
+
+// Files in one private folder per process, rewritten for every input, removed at exit.
+struct TempDir {
+  TempDir() {
+    const char* dir = std::getenv("TMPDIR");
+    path = std::string(dir && *dir ? dir : "/tmp") + "/palpate-mesh-fuzz-XXXXXX";
+    if (!mkdtemp(path.data())) std::abort();
+  }
+  ~TempDir() {
+    for (const char* name : {"/m.msh", "/m.node", "/m.ele"}) unlink((path + name).c_str());
+    rmdir(path.c_str());
+  }
+  std::string file(const char* name) const { return path + name; }
+  std::string path;
+};
+
+void write(const std::string& file, std::string_view text) {
+  std::FILE* f = std::fopen(file.c_str(), "wb");
+  if (!f) std::abort();
+  if (!text.empty() && std::fwrite(text.data(), 1, text.size(), f) != text.size()) std::abort();
+  std::fclose(f);
+}
+
+// The promised result (aborts otherwise).
+void check(const palpate::TetMesh& m, int64_t declared) {
+  const int64_t n = m.positions.cols();
+  if (n < 4 || m.tetrahedra.empty() || !m.positions.allFinite() || m.unused_nodes < 0) std::abort();
+  if (static_cast<int64_t>(m.nodal_volume.size()) != n || declared < n + m.unused_nodes) std::abort();
+  double sum = 0;
+  for (double v : m.nodal_volume) {
+    if (!(v > 0)) std::abort();
+    sum += v;
+  }
+  for (const auto& t : m.tetrahedra) {
+    for (int v : t)
+      if (v < 0 || v >= n) std::abort();
+    const palpate::Vec3 a = m.positions.col(t[0]);
+    const double V = (m.positions.col(t[1]) - a).dot((m.positions.col(t[2]) - a).cross(m.positions.col(t[3]) - a));
+    if (!(V > 0)) std::abort();
+  }
+  if (!(std::abs(sum - m.total_volume) <= 1e-9 * m.total_volume)) std::abort();
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  static TempDir dir;
+  if (size == 0) return 0;
+  const bool tetgen = data[0] & 1;
+  const std::string_view rest(reinterpret_cast<const char*>(data) + 1, size - 1);
+  std::string file;
+  if (tetgen) {
+    const size_t split = rest.find('\0');
+    write(dir.file("/m.node"), rest.substr(0, split));
+    write(dir.file("/m.ele"), split == std::string_view::npos ? std::string_view() : rest.substr(split + 1));
+    file = dir.file("/m.node");
+  } else {
+    write(dir.file("/m.msh"), rest);
+    file = dir.file("/m.msh");
+  }
+  constexpr int64_t kMaxNodes = 4096;  // bounded work per input
+  palpate::TetMesh mesh;
+  try {
+    mesh = palpate::read_mesh(file, kMaxNodes);
+  } catch (const std::runtime_error&) {
+    return 0;
+  }
+  int64_t declared = -1;
+  try {
+    declared = palpate::declared_mesh_nodes(file);  // must read the header of a file that was read
+  } catch (const std::runtime_error&) {
+    std::abort();
+  }
+  check(mesh, declared);
+  return 0;
+}

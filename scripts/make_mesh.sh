@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# A tetrahedral mesh of the body's box, graded toward a focus point, with Debian's
+# gmsh; its vertices are a node cloud for the "mesh" distribution
+# (docs/scene-format.md). Writes gmsh .msh 4.1 ASCII.
+#
+#   scripts/make_mesh.sh [options]
+#     --out FILE        output .msh (default scenes/meshes/graded_cube.msh)
+#     --focus-size H0   element size at the focus, m (default 0.03)
+#     --far-size H1     largest element size, m (default 0.25)
+#     --growth G        size growth: h(r) = min(H1, H0 + (G - 1) r) at distance r from
+#                       the focus, i.e. neighbouring elements grow by about a factor G
+#                       (default 1.25)
+#     --box XMIN YMIN ZMIN XMAX YMAX ZMAX   the box, m (default -1 -1 -2 1 1 0: the
+#                       2 m cube with its top face at z = 0)
+#     --focus X Y Z     the focus, m (default the centre of the top face, the indenter's site)
+#     --seed N          gmsh's Mesh.RandomSeed (default 1); the mesh is deterministic
+#                       for a given gmsh version, seed and options
+#     --format F        msh41 (default) or msh22
+#
+# gmsh is not needed by the build or the tests. If it is missing the script installs
+# Debian's package when run as root, else says how.
+set -euo pipefail
+
+out=scenes/meshes/graded_cube.msh
+h0=0.03
+h1=0.25
+growth=1.25
+box=(-1 -1 -2 1 1 0)
+focus=()
+seed=1
+format=msh41
+
+die() { echo "make_mesh.sh: $*" >&2; exit 2; }
+number() { [[ "$2" =~ ^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$ ]] || die "$1: expected a number, got '$2'"; }
+
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --out) out=${2:?--out needs a file}; shift 2 ;;
+    --focus-size) number "$1" "${2:-}"; h0=$2; shift 2 ;;
+    --far-size) number "$1" "${2:-}"; h1=$2; shift 2 ;;
+    --growth) number "$1" "${2:-}"; growth=$2; shift 2 ;;
+    --box) [ $# -ge 7 ] || die "--box needs 6 numbers"
+           for v in "${@:2:6}"; do number --box "$v"; done
+           box=("${@:2:6}"); shift 7 ;;
+    --focus) [ $# -ge 4 ] || die "--focus needs 3 numbers"
+             for v in "${@:2:3}"; do number --focus "$v"; done
+             focus=("${@:2:3}"); shift 4 ;;
+    --seed) [[ "${2:-}" =~ ^[0-9]+$ ]] || die "--seed: expected a non-negative integer"; seed=$2; shift 2 ;;
+    --format) case "${2:-}" in msh41|msh22) format=$2 ;; *) die "--format: msh41 or msh22, got '${2:-}'" ;; esac; shift 2 ;;
+    -h|--help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) die "unknown option '$1' (--help)" ;;
+  esac
+done
+
+awk -v h0="$h0" -v h1="$h1" -v g="$growth" 'BEGIN { exit !(h0 > 0 && h1 >= h0 && g > 1) }' ||
+  die "need 0 < --focus-size <= --far-size and --growth > 1 (got $h0, $h1, $growth)"
+awk -v a="${box[0]}" -v b="${box[1]}" -v c="${box[2]}" -v d="${box[3]}" -v e="${box[4]}" -v f="${box[5]}" \
+  'BEGIN { exit !(d > a && e > b && f > c) }' || die "--box: max must exceed min on every axis"
+if [ ${#focus[@]} -eq 0 ]; then
+  focus=($(awk -v a="${box[0]}" -v b="${box[1]}" -v d="${box[3]}" -v e="${box[4]}" -v f="${box[5]}" \
+    'BEGIN { printf "%.17g %.17g %.17g", (a + d) / 2, (b + e) / 2, f }'))
+fi
+
+if ! command -v gmsh >/dev/null; then
+  if [ "$(id -u)" -eq 0 ]; then
+    echo "make_mesh.sh: installing Debian's gmsh" >&2
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gmsh >/dev/null
+  else
+    die "gmsh not found: sudo apt-get install -y gmsh"
+  fi
+fi
+
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+geo=$work/box.geo
+cat > "$geo" <<EOF
+// Written by scripts/make_mesh.sh
+SetFactory("OpenCASCADE");
+Box(1) = {${box[0]}, ${box[1]}, ${box[2]}, ${box[3]} - (${box[0]}), ${box[4]} - (${box[1]}), ${box[5]} - (${box[2]})};
+// Element size: h(r) = min(H1, H0 + (G - 1) r), r the distance to the focus.
+Field[1] = MathEval;
+Field[1].F = "Min($h1, $h0 + ($growth - 1) * Sqrt((x - (${focus[0]}))^2 + (y - (${focus[1]}))^2 + (z - (${focus[2]}))^2))";
+Background Field = 1;
+Mesh.MeshSizeExtendFromBoundary = 0;
+Mesh.MeshSizeFromPoints = 0;
+Mesh.MeshSizeFromCurvature = 0;
+Mesh.Algorithm = 6;      // Frontal-Delaunay on the faces
+Mesh.Algorithm3D = 1;    // Delaunay
+Mesh.Optimize = 1;
+Mesh.ElementOrder = 1;
+Mesh.RandomSeed = $seed;
+Mesh.Binary = 0;
+EOF
+
+mkdir -p "$(dirname "$out")"
+gmsh -3 -nt 1 -format "$format" -o "$out" "$geo" > "$work/gmsh.log" 2>&1 || { cat "$work/gmsh.log" >&2; die "gmsh failed"; }
+grep -E "Warning|Error" "$work/gmsh.log" >&2 || true
+nodes=$(awk '/^\$Nodes/ { getline; print (NF == 4 ? $2 : $1); exit }' "$out")
+tets=$(grep -E "^Info *: .*tetrahedra" "$work/gmsh.log" | tail -1 | sed 's/^Info *: *//' || true)
+echo "make_mesh.sh: $out: $nodes nodes; focus size $h0 m at (${focus[*]}), far size $h1 m, growth $growth${tets:+; $tets}"

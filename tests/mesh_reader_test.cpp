@@ -1,0 +1,555 @@
+// Tetrahedral mesh files (core/mesh_reader.h) and the "mesh" distribution built on
+// them: gmsh 4.1 and 2.2, TetGen .node/.ele, nodal volumes, every refusal with its
+// file, line and reason, and the scene rules (volumes, hex_fem, the box).
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <numeric>
+#include <sstream>
+#include <string>
+
+#include <unistd.h>
+
+#include "core/mesh_reader.h"
+#include "core/model.h"
+#include "core/scene.h"
+
+namespace palpate {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kData = fs::path(PALPATE_SOURCE_DIR) / "tests" / "data";
+
+// The unit cube as six positively oriented Kuhn tetrahedra around the diagonal from
+// node 1 (0,0,0) to node 8 (1,1,1); node k is the corner with bits k-1 = (x, y, z).
+// Node 20 is a geometry point no tetrahedron uses; a point element and two
+// triangles are ignored.
+const std::string kGmsh41 = R"($MeshFormat
+4.1 0 8
+$EndMeshFormat
+$PhysicalNames
+1
+3 1 "the cube"
+$EndPhysicalNames
+$Entities
+1 0 0 1
+1 5 5 5 0
+1 0 0 0 1 1 1 1 1 0
+$EndEntities
+$Nodes
+2 9 1 20
+0 1 0 1
+20
+5 5 5
+3 1 0 8
+1
+2
+3
+4
+5
+6
+7
+8
+0 0 0
+1 0 0
+0 1 0
+1 1 0
+0 0 1
+1 0 1
+0 1 1
+1 1 1
+$EndNodes
+$Elements
+3 9 1 9
+0 1 15 1
+1 20
+2 1 2 2
+2 1 2 4
+3 1 4 3
+3 1 4 6
+4 1 2 4 8
+5 1 6 2 8
+6 1 4 3 8
+7 1 3 7 8
+8 1 5 6 8
+9 1 7 5 8
+$EndElements
+)";
+
+const std::string kGmsh22 = R"($MeshFormat
+2.2 0 8
+$EndMeshFormat
+$Nodes
+9
+1 0 0 0
+2 1 0 0
+3 0 1 0
+4 1 1 0
+5 0 0 1
+6 1 0 1
+7 0 1 1
+8 1 1 1
+20 5 5 5
+$EndNodes
+$Elements
+9
+1 15 2 0 1 20
+2 2 2 0 1 1 2 4
+3 4 2 1 1 1 2 4 8
+4 4 2 1 1 1 6 2 8
+5 4 2 1 1 1 4 3 8
+6 4 2 1 1 1 3 7 8
+7 4 2 1 1 1 5 6 8
+8 4 2 1 1 1 7 5 8
+9 2 2 0 1 1 4 3
+$EndElements
+)";
+
+// A private folder for the files a test writes.
+class MeshFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("palpate-mesh-" + std::to_string(getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  fs::path write(const std::string& name, const std::string& text) const {
+    const fs::path p = dir_ / name;
+    std::ofstream(p, std::ios::binary) << text;
+    return p;
+  }
+  // The message of reading `text` as the file `name` (with an optional TetGen .ele), or "".
+  std::string error_of(const std::string& name, const std::string& text, const std::string& ele = "",
+                       int64_t max_nodes = kMaxMeshNodes) const {
+    const fs::path p = write(name, text);
+    if (!ele.empty()) write(fs::path(name).replace_extension(".ele").string(), ele);
+    try {
+      read_mesh(p, max_nodes);
+    } catch (const std::runtime_error& e) {
+      return e.what();
+    }
+    return "";
+  }
+  // The line (from 1) of `part` in `text`.
+  static int line_of(const std::string& text, const std::string& part) {
+    const size_t pos = text.find(part);
+    EXPECT_NE(pos, std::string::npos) << part;
+    return 1 + static_cast<int>(std::count(text.begin(), text.begin() + std::min(pos, text.size()), '\n'));
+  }
+  // "<dir>/<name>:<line of `part` in text>: "
+  std::string at(const std::string& name, const std::string& text, const std::string& part) const {
+    return (dir_ / name).string() + ":" + std::to_string(line_of(text, part)) + ": ";
+  }
+  static std::string replace(std::string text, const std::string& from, const std::string& to) {
+    const size_t pos = text.find(from);
+    EXPECT_NE(pos, std::string::npos) << from;
+    EXPECT_EQ(text.find(from, pos + 1), std::string::npos) << "not unique: " << from;
+    return text.replace(pos, from.size(), to);
+  }
+
+  fs::path dir_;
+};
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+double signed_volume(const TetMesh& m, const std::array<int, 4>& t) {
+  const Vec3 a = m.positions.col(t[0]);
+  return (m.positions.col(t[1]) - a).dot((m.positions.col(t[2]) - a).cross(m.positions.col(t[3]) - a)) / 6.0;
+}
+
+// Volumes: the tetrahedra fill `box_volume`, each node holds a quarter of its tetrahedra,
+// every tetrahedron is stored positive.
+void expect_consistent(const TetMesh& m, double box_volume) {
+  EXPECT_NEAR(m.total_volume, box_volume, 1e-12 * box_volume);
+  EXPECT_NEAR(std::accumulate(m.nodal_volume.begin(), m.nodal_volume.end(), 0.0), box_volume, 1e-12 * box_volume);
+  std::vector<double> lumped(m.positions.cols(), 0.0);
+  for (const auto& t : m.tetrahedra) {
+    const double V = signed_volume(m, t);
+    EXPECT_GT(V, 0.0);
+    for (int v : t) lumped[v] += V / 4;
+  }
+  for (size_t i = 0; i < lumped.size(); ++i) EXPECT_NEAR(m.nodal_volume[i], lumped[i], 1e-15);
+  for (double v : m.nodal_volume) EXPECT_GT(v, 0.0);
+}
+
+TEST_F(MeshFiles, Gmsh41KeepsTheTetrahedraAndDropsTheUnusedNode) {
+  const TetMesh m = read_gmsh(write("cube.msh", kGmsh41));
+  EXPECT_EQ(m.positions.cols(), 8);
+  EXPECT_EQ(m.tetrahedra.size(), 6u);
+  EXPECT_EQ(m.unused_nodes, 1);
+  EXPECT_EQ(m.ignored_elements, 3);
+  EXPECT_FALSE(m.reoriented);
+  expect_consistent(m, 1.0);
+  // Corner 1 (the diagonal's end) is in all six tetrahedra, corner 2 in two.
+  EXPECT_NEAR(m.nodal_volume[0], 6 * (1.0 / 6) / 4, 1e-15);
+  EXPECT_NEAR(m.nodal_volume[1], 2 * (1.0 / 6) / 4, 1e-15);
+  EXPECT_EQ(m.positions.col(7), Vec3(1, 1, 1));
+}
+
+TEST_F(MeshFiles, Gmsh22GivesTheSameMesh) {
+  const TetMesh a = read_gmsh(write("a.msh", kGmsh41));
+  const TetMesh b = read_gmsh(write("b.msh", kGmsh22));
+  EXPECT_EQ(b.unused_nodes, 1);
+  EXPECT_EQ(b.ignored_elements, 3);
+  EXPECT_EQ(a.positions, b.positions);
+  EXPECT_EQ(a.nodal_volume, b.nodal_volume);
+  EXPECT_EQ(a.tetrahedra, b.tetrahedra);
+}
+
+TEST_F(MeshFiles, CrLfLineEndsAndTrailingBlanksAreFine) {
+  std::string text;
+  for (char c : kGmsh41) text += c == '\n' ? std::string(" \r\n") : std::string(1, c);
+  expect_consistent(read_gmsh(write("crlf.msh", text)), 1.0);
+}
+
+TEST(MeshData, TheCommittedGmshMeshFillsTheUnitCube) {
+  const TetMesh m = read_mesh(kData / "cube_tet_small.msh");
+  EXPECT_GT(m.positions.cols(), 200);
+  EXPECT_LT(m.positions.cols(), 600);
+  EXPECT_EQ(m.unused_nodes, 0);
+  expect_consistent(m, 1.0);
+  EXPECT_EQ(declared_mesh_nodes(kData / "cube_tet_small.msh"), m.positions.cols());
+}
+
+TEST(MeshData, TheCommittedTetGenPairIsOneBasedAndNegativelyOriented) {
+  const TetMesh m = read_mesh(kData / "cube_tetgen.node");
+  EXPECT_EQ(m.positions.cols(), 9);
+  EXPECT_EQ(m.tetrahedra.size(), 12u);
+  EXPECT_TRUE(m.reoriented);
+  expect_consistent(m, 1.0);
+  EXPECT_EQ(m.positions.col(8), Vec3(0.5, 0.5, 0.5));
+  EXPECT_NEAR(m.nodal_volume[8], 12 * (1.0 / 12) / 4, 1e-15);  // the centre is in every tetrahedron
+  EXPECT_EQ(declared_mesh_nodes(kData / "cube_tetgen.node"), 9);
+}
+
+// The Kuhn cube as TetGen text, with 0- or 1-based indices.
+std::string tetgen_node(int base) {
+  std::ostringstream s;
+  s << "8 3 0 0  # points, dimension, attributes, markers\n";
+  for (int k = 0; k < 8; ++k) s << k + base << "  " << (k & 1) << ' ' << (k >> 1 & 1) << ' ' << (k >> 2 & 1) << '\n';
+  return s.str();
+}
+std::string tetgen_ele(int base, bool ten_nodes = false) {
+  const int tets[6][4] = {{1, 2, 4, 8}, {1, 6, 2, 8}, {1, 4, 3, 8}, {1, 3, 7, 8}, {1, 5, 6, 8}, {1, 7, 5, 8}};
+  std::ostringstream s;
+  s << "6 " << (ten_nodes ? 10 : 4) << " 0\n";
+  for (int t = 0; t < 6; ++t) {
+    s << t + base;
+    for (int a = 0; a < 4; ++a) s << ' ' << tets[t][a] - 1 + base;
+    if (ten_nodes)
+      for (int a = 0; a < 6; ++a) s << ' ' << tets[t][a % 4] - 1 + base;
+    s << '\n';
+  }
+  return s.str();
+}
+
+TEST_F(MeshFiles, TetGenZeroAndOneBasedAndTenNodeElements) {
+  write("zero.ele", tetgen_ele(0));
+  write("one.ele", tetgen_ele(1));
+  write("ten.ele", tetgen_ele(1, true));
+  const TetMesh zero = read_tetgen(write("zero.node", tetgen_node(0)));
+  const TetMesh one = read_tetgen(write("one.node", tetgen_node(1)));
+  const TetMesh ten = read_tetgen(write("ten.node", tetgen_node(1)));
+  expect_consistent(zero, 1.0);
+  EXPECT_EQ(zero.positions, one.positions);
+  EXPECT_EQ(zero.tetrahedra, one.tetrahedra);
+  EXPECT_EQ(ten.tetrahedra, one.tetrahedra);
+  const TetMesh gmsh = read_gmsh(write("cube.msh", kGmsh41));
+  EXPECT_EQ(one.tetrahedra, gmsh.tetrahedra);
+}
+
+TEST_F(MeshFiles, ScaledToTheDefaultCubeTheVolumesSumToItsVolume) {
+  std::string text = "8 3 0 0\n";
+  for (int k = 0; k < 8; ++k)
+    text += std::to_string(k) + "  " + (k & 1 ? "1" : "-1") + " " + (k >> 1 & 1 ? "1" : "-1") + " " +
+            (k >> 2 & 1 ? "0" : "-2") + "\n";
+  write("big.ele", tetgen_ele(0));
+  expect_consistent(read_tetgen(write("big.node", text)), 8.0);
+}
+
+// ---------------------------------------------------------------------------
+// Refusals: file, line and reason.
+
+TEST_F(MeshFiles, MalformedNumber) {
+  const std::string text = replace(kGmsh41, "0 1 1\n", "0 1 1x\n");
+  EXPECT_EQ(error_of("m.msh", text), at("m.msh", text, "1x") + "z: expected a number, got '1x'");
+}
+
+TEST_F(MeshFiles, NotANumberCoordinate) {
+  const std::string text = replace(kGmsh22, "7 0 1 1", "7 0 nan 1");
+  EXPECT_EQ(error_of("m.msh", text), at("m.msh", text, "nan") + "y: must be a finite number, got 'nan'");
+  const std::string huge = replace(kGmsh22, "7 0 1 1", "7 0 1e300 1");
+  EXPECT_TRUE(contains(error_of("m.msh", huge), "exceeds 1e+12")) << error_of("m.msh", huge);
+  const std::string overflow = replace(kGmsh22, "7 0 1 1", "7 0 1e999 1");
+  EXPECT_TRUE(contains(error_of("m.msh", overflow), "'1e999' is out of range"));
+}
+
+TEST_F(MeshFiles, MissingSections) {
+  const std::string no_elements = kGmsh41.substr(0, kGmsh41.find("$Elements"));
+  EXPECT_EQ(error_of("m.msh", no_elements), (dir_ / "m.msh").string() + ": no $Elements section");
+  const std::string no_nodes = kGmsh22.substr(0, kGmsh22.find("$Nodes")) + kGmsh22.substr(kGmsh22.find("$Elements"));
+  EXPECT_EQ(error_of("m.msh", no_nodes), (dir_ / "m.msh").string() + ": no $Nodes section");
+  const std::string only_format = kGmsh22.substr(0, kGmsh22.find("$Nodes"));
+  EXPECT_EQ(error_of("m.msh", only_format), (dir_ / "m.msh").string() + ": no $Nodes section");
+  EXPECT_EQ(error_of("m.msh", ""), (dir_ / "m.msh").string() + ": empty file, expected a gmsh mesh");
+  EXPECT_EQ(error_of("m.msh", "hello\n"),
+            (dir_ / "m.msh").string() + ":1: the file must start with $MeshFormat (is it a gmsh .msh file?), got 'hello'");
+  const std::string unclosed = replace(kGmsh41, "$EndPhysicalNames\n", "");
+  EXPECT_EQ(error_of("m.msh", unclosed),
+            at("m.msh", unclosed, "$PhysicalNames") + "section $PhysicalNames is not closed by $EndPhysicalNames");
+  const std::string truncated = kGmsh41.substr(0, kGmsh41.find("9 1 7 5 8"));
+  EXPECT_TRUE(contains(error_of("m.msh", truncated), "unexpected end of file, expected elementTag"));
+}
+
+TEST_F(MeshFiles, FormatsThatAreNotRead) {
+  const std::string binary = replace(kGmsh41, "4.1 0 8", "4.1 1 8");
+  EXPECT_EQ(error_of("m.msh", binary),
+            at("m.msh", binary, "4.1") + "binary .msh files are not supported: save the mesh as ASCII (gmsh option Mesh.Binary = 0)");
+  EXPECT_TRUE(contains(error_of("m.msh", replace(kGmsh41, "4.1 0 8", "4 0 8")), "gmsh format 4.0 is not supported"));
+  EXPECT_TRUE(contains(error_of("m.msh", replace(kGmsh41, "4.1 0 8", "3.0 0 8")), "unknown gmsh format version '3.0'"));
+  EXPECT_EQ(error_of("m.vtk", kGmsh41),
+            (dir_ / "m.vtk").string() +
+                ": unknown mesh format '.vtk' (known: .msh, gmsh 4.1 or 2.2 ASCII; .node with its .ele, TetGen)");
+  const std::string triangles_only = kGmsh22.substr(0, kGmsh22.find("$Elements")) +
+                                     "$Elements\n1\n1 2 2 0 1 1 2 4\n$EndElements\n";
+  EXPECT_EQ(error_of("m.msh", triangles_only),
+            (dir_ / "m.msh").string() +
+                ": no 4-node tetrahedra (element type 4) in $Elements, 1 other elements (a volume mesh of order 1 "
+                "is needed: gmsh -3 -order 1)");
+}
+
+TEST_F(MeshFiles, CountsThatDoNotMatch) {
+  const std::string nodes = replace(kGmsh41, "2 9 1 20", "2 10 1 20");
+  EXPECT_TRUE(contains(error_of("m.msh", nodes), "the node blocks hold 9 nodes, the $Nodes header says 10"))
+      << error_of("m.msh", nodes);
+  const std::string elements = replace(kGmsh41, "3 9 1 9", "3 8 1 9");
+  EXPECT_TRUE(contains(error_of("m.msh", elements), "the element blocks hold more than the 8 elements the $Elements header declares"))
+      << error_of("m.msh", elements);
+  const std::string v2 = replace(kGmsh22, "$Nodes\n9\n", "$Nodes\n10\n");
+  EXPECT_TRUE(contains(error_of("m.msh", v2), "node-number: expected an integer, got '$EndNodes'"));
+}
+
+TEST_F(MeshFiles, IndicesOutOfRangeAndDuplicateTags) {
+  const std::string unknown = replace(kGmsh41, "9 1 7 5 8", "9 1 7 5 9");
+  EXPECT_EQ(error_of("m.msh", unknown), at("m.msh", unknown, "9 1 7 5 9") + "tetrahedron 9: node tag 9 is not in $Nodes");
+  const std::string duplicate = replace(kGmsh22, "8 1 1 1", "2 1 1 1");
+  EXPECT_EQ(error_of("m.msh", duplicate),
+            at("m.msh", duplicate, "2 1 1 1") + "node tag 2 appears twice (first at line 7)");
+  const std::string ele = replace(tetgen_ele(1), "6 1 7 5 8", "6 1 7 5 9");
+  EXPECT_EQ(error_of("c.node", tetgen_node(1), ele),
+            at("c.ele", ele, "6 1 7 5 9") + "tetrahedron 6: node index 9 is out of range [1, 8]");
+  const std::string zero = replace(tetgen_ele(0), "5 0 6 4 7", "5 0 6 4 8");
+  EXPECT_TRUE(contains(error_of("c.node", tetgen_node(0), zero), "node index 8 is out of range [0, 7]"));
+}
+
+TEST_F(MeshFiles, DegenerateTetrahedra) {
+  // A repeated node, and a flat tetrahedron (node 8 moved into the plane of 1, 2, 4 would
+  // coincide with 4: move it to z = 0 beside the cube instead).
+  const std::string repeated = replace(kGmsh22, "3 4 2 1 1 1 2 4 8", "3 4 2 1 1 1 2 4 4");
+  EXPECT_EQ(error_of("m.msh", repeated),
+            at("m.msh", repeated, "1 2 4 4") + "tetrahedron 3 uses the node at line 9 twice (degenerate)");
+  const std::string node = "5 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 2 2 0\n";
+  const std::string ele = "2 4 0\n1 1 2 3 4\n2 1 2 3 5\n";
+  EXPECT_EQ(error_of("flat.node", node, ele),
+            (dir_ / "flat.ele").string() + ":3: tetrahedron 2 is degenerate: volume 0 m^3 with longest edge 2.82843 m "
+                                           "(|V| must exceed 1e-12 L^3)");
+}
+
+TEST_F(MeshFiles, InvertedTetrahedron) {
+  const std::string text = replace(kGmsh41, "9 1 7 5 8", "9 1 5 7 8");
+  EXPECT_EQ(error_of("m.msh", text),
+            at("m.msh", text, "9 1 5 7 8") +
+                "tetrahedron 9 is inverted: volume -0.166667 m^3, the opposite sign of the file's first tetrahedron "
+                "(line " + std::to_string(line_of(text, "4 1 2 4 8")) + "); the mesh is tangled or inconsistently oriented");
+}
+
+TEST_F(MeshFiles, CoincidentNodes) {
+  // Two tetrahedra touching at a point through two distinct nodes (a crack).
+  const std::string node = "8 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 0 0\n6 2 0 0\n7 1 1 0\n8 1 0 1\n";
+  EXPECT_EQ(error_of("crack.node", node, "2 4 0\n1 1 2 3 4\n2 5 6 7 8\n"),
+            (dir_ / "crack.node").string() + ":6: this node coincides with the node at line 3 (1, 0, 0)");
+}
+
+TEST_F(MeshFiles, TooManyNodes) {
+  EXPECT_EQ(error_of("m.msh", kGmsh41, "", 8), at("m.msh", kGmsh41, "2 9 1 20") + "9 nodes exceed the limit of 8");
+  EXPECT_EQ(error_of("c.node", tetgen_node(1), tetgen_ele(1), 7), (dir_ / "c.node").string() + ":1: 8 nodes exceed the limit of 7");
+}
+
+TEST_F(MeshFiles, TetGenStructure) {
+  EXPECT_EQ(error_of("c.node", replace(tetgen_node(1), "\n1  0 0 0", "\n2  0 0 0"), tetgen_ele(1)),
+            (dir_ / "c.node").string() + ":2: the first point index must be 0 or 1, got 2");
+  EXPECT_EQ(error_of("c.node", replace(tetgen_node(1), "\n5  0 0 1", "\n6  0 0 1"), tetgen_ele(1)),
+            (dir_ / "c.node").string() + ":6: point index 6 where 5 was expected (indices must be consecutive)");
+  EXPECT_EQ(error_of("c.node", replace(tetgen_node(1), "\n5  0 0 1", "\n5  0 0 1 3"), tetgen_ele(1)),
+            (dir_ / "c.node").string() + ":6: unexpected '3' after a point (index, x, y, z, 0 attributes, 0 markers)");
+  EXPECT_EQ(error_of("c.node", replace(tetgen_node(1), "8 3 0 0", "8 2 0 0"), tetgen_ele(1)),
+            (dir_ / "c.node").string() + ":1: dimension: must be in [3, 3], got 2");
+  EXPECT_EQ(error_of("c.node", tetgen_node(1), replace(tetgen_ele(1), "6 4 0", "6 5 0")),
+            (dir_ / "c.ele").string() + ":1: nodes per tetrahedron: must be 4 or 10, got 5");
+  EXPECT_EQ(error_of("c.node", tetgen_node(1) + "9 1 1 1\n", tetgen_ele(1)),
+            (dir_ / "c.node").string() + ":10: unexpected '9' after the 8 points");
+  // The .ele is missing.
+  const fs::path lonely = write("lonely.node", tetgen_node(1));
+  try {
+    read_mesh(lonely);
+    ADD_FAILURE() << "accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), (dir_ / "lonely.ele").string() + ": cannot open TetGen .ele file (the .node file's sibling)");
+  }
+}
+
+TEST_F(MeshFiles, DeclaredNodeCountIsReadFromTheHeader) {
+  EXPECT_EQ(declared_mesh_nodes(write("a.msh", kGmsh41)), 9);
+  EXPECT_EQ(declared_mesh_nodes(write("b.msh", kGmsh22)), 9);
+  EXPECT_EQ(declared_mesh_nodes(write("c.node", "# comment\n123456789 3 0 0\n")), 123456789);
+  EXPECT_THROW(declared_mesh_nodes(write("d.msh", "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n")), std::runtime_error);
+}
+
+// ---------------------------------------------------------------------------
+// The "mesh" distribution in scenes and models.
+
+std::string mesh_scene(const std::string& file, const std::string& extra = R"(, "mls": {"volumes": "mesh"})",
+                       const std::string& box = R"("box": {"min": [0, 0, 0], "max": [1, 1, 1]}, )") {
+  return R"({"body": {)" + box + R"("distribution": {"type": "mesh", "file": ")" + file + R"("}})" + extra + "}";
+}
+
+SceneError scene_error(const std::string& json, const fs::path& base = kData) {
+  try {
+    parse_scene(json, "inline", base);
+  } catch (const SceneError& e) {
+    return e;
+  }
+  ADD_FAILURE() << "accepted: " << json;
+  return SceneError("", "", "");
+}
+
+TEST(MeshScene, FileIsResolvedAgainstTheSceneFolder) {
+  const Scene s = parse_scene(mesh_scene("cube_tet_small.msh"), "inline", kData);
+  EXPECT_EQ(s.distribution.type, DistributionType::mesh);
+  EXPECT_EQ(s.mls.volumes, VolumeRule::mesh);
+  EXPECT_TRUE(s.distribution.mesh_file.is_absolute());
+  EXPECT_TRUE(fs::equivalent(s.distribution.mesh_file, kData / "cube_tet_small.msh"));
+  EXPECT_STREQ(to_string(DistributionType::mesh), "mesh");
+}
+
+TEST(MeshScene, Refusals) {
+  SceneError e = scene_error(mesh_scene("cube_tet_small.msh", ""));
+  EXPECT_EQ(e.field(), "/mls/volumes");
+  EXPECT_EQ(e.reason(), "a 'mesh' distribution takes its volumes from the tetrahedra: set \"volumes\": \"mesh\" (got "
+                        "'kernel', the default)");
+  e = scene_error(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "lattice"})"));
+  EXPECT_TRUE(contains(e.reason(), "(got 'lattice')")) << e.reason();
+  e = scene_error(R"({"mls": {"volumes": "mesh"}})");
+  EXPECT_EQ(e.field(), "/mls/volumes");
+  EXPECT_TRUE(contains(e.reason(), "'mesh' volumes need a 'mesh' distribution")) << e.reason();
+  e = scene_error(R"({"body": {"distribution": {"type": "mesh"}}, "mls": {"volumes": "mesh"}})");
+  EXPECT_EQ(e.field(), "/body/distribution/file");
+  EXPECT_TRUE(contains(e.reason(), "required when type is 'mesh'")) << e.reason();
+  e = scene_error(mesh_scene("missing.msh"));
+  EXPECT_EQ(e.field(), "/body/distribution/file");
+  EXPECT_TRUE(contains(e.reason(), "mesh file 'missing.msh' not found")) << e.reason();
+  e = scene_error(mesh_scene("cube_tetgen.ele"));
+  EXPECT_TRUE(contains(e.reason(), "unknown mesh format '.ele'")) << e.reason();
+  e = scene_error(mesh_scene("cube_tet_small.msh", R"(, "model": "hex_fem")"));
+  EXPECT_EQ(e.field(), "/body/distribution/type");
+  EXPECT_TRUE(contains(e.reason(), "the hex_fem model meshes a lattice with bricks and cannot use a tetrahedral 'mesh' cloud"))
+      << e.reason();
+}
+
+TEST(MeshScene, TetGenNeedsItsElementFile) {
+  const fs::path dir = fs::temp_directory_path() / ("palpate-mesh-scene-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  fs::copy_file(kData / "cube_tetgen.node", dir / "alone.node", fs::copy_options::overwrite_existing);
+  const SceneError e = scene_error(mesh_scene("alone.node"), dir);
+  fs::remove_all(dir);
+  EXPECT_EQ(e.field(), "/body/distribution/file");
+  EXPECT_TRUE(contains(e.reason(), "the TetGen element file of 'alone.node' not found")) << e.reason();
+}
+
+TEST(MeshScene, ModelOfTheSmallMeshReportsItsCloud) {
+  const Model m = build_model(parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh", "neighbors": 20,
+      "support_rule": "kth_distance", "support_factor": 1.1}, "fixed": ["bottom", "sides"])"),
+                                          "inline", kData));
+  const TetMesh mesh = read_mesh(kData / "cube_tet_small.msh");
+  EXPECT_EQ(m.particle_count, mesh.positions.cols());
+  EXPECT_EQ(m.mesh_tetrahedra, static_cast<int64_t>(mesh.tetrahedra.size()));
+  EXPECT_EQ(m.mesh_unused_nodes, 0);
+  EXPECT_NEAR(m.total_volume, m.box_volume, 1e-12);
+  EXPECT_EQ(m.box_volume, 1.0);
+  for (int i = 0; i < m.particle_count; ++i) {
+    EXPECT_EQ(m.volume[i], mesh.nodal_volume[i]);
+    EXPECT_NEAR(m.mass[i], 1000 * mesh.nodal_volume[i], 1e-12);
+    const Vec3 X = m.rest_position.col(i);
+    const bool on_fixed = X.z() == 0 || X.x() == 0 || X.x() == 1 || X.y() == 0 || X.y() == 1;
+    EXPECT_EQ(m.fixed[i] != 0, on_fixed) << i;
+  }
+  EXPECT_GT(m.min_spacing, 0.0);
+  EXPECT_GT(m.max_spacing, m.min_spacing);
+  EXPECT_TRUE(std::isfinite(m.worst_condition));
+  EXPECT_GT(m.worst_condition, 1.0);
+  EXPECT_GT(m.integration_residual_nodal, 0.0);
+}
+
+TEST(MeshScene, TheMeshMustFillTheBox) {
+  // The unit-cube mesh against the default 2 m cube.
+  try {
+    build_model(parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh"})", ""), "inline", kData));
+    ADD_FAILURE() << "accepted";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/body/distribution/file");
+    EXPECT_TRUE(contains(e.reason(), "not /body/box [-1, -1, -2] ... [1, 1, 0]: the mesh must fill the box")) << e.reason();
+  }
+  // A hole: the committed TetGen cube without its last tetrahedron.
+  const fs::path dir = fs::temp_directory_path() / ("palpate-mesh-hole-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  fs::copy_file(kData / "cube_tetgen.node", dir / "hole.node", fs::copy_options::overwrite_existing);
+  {
+    std::ifstream in(kData / "cube_tetgen.ele");
+    std::ofstream out(dir / "hole.ele");
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.rfind("12  4  1", 0) == 0) line = "11  4  1";
+      if (line.rfind("  12 ", 0) == 0) continue;
+      out << line << '\n';
+    }
+  }
+  try {
+    build_model(parse_scene(mesh_scene("hole.node", R"(, "mls": {"volumes": "mesh", "neighbors": 4}, "fixed": [])"),
+                            "inline", dir));
+    ADD_FAILURE() << "accepted";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/body/distribution/file");
+    EXPECT_TRUE(contains(e.reason(), "hold 0.916666667 m^3, the box 1 m^3 (a hole, an overlap or another shape)"))
+        << e.reason();
+  }
+  fs::remove_all(dir);
+  // The whole TetGen cube builds: 9 particles, exact volumes.
+  const Model m = build_model(parse_scene(mesh_scene("cube_tetgen.node", R"(, "mls": {"volumes": "mesh", "neighbors": 4}, "fixed": [])"),
+                                          "inline", kData));
+  EXPECT_EQ(m.particle_count, 9);
+  EXPECT_NEAR(m.total_volume, 1.0, 1e-15);
+}
+
+TEST(MeshScene, ReaderErrorsNameTheFileAndLine) {
+  const fs::path dir = fs::temp_directory_path() / ("palpate-mesh-bad-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  std::ofstream(dir / "bad.msh") << "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 x\n";
+  try {
+    build_model(parse_scene(mesh_scene("bad.msh"), "inline", dir));
+    ADD_FAILURE() << "accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), (dir / "bad.msh").string() + ":5: numNodes: expected an integer, got 'x'");
+  }
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace palpate
