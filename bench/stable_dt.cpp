@@ -9,13 +9,10 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "bench/stability.h"
 #include "clients/cli.h"
-#include "core/indentation.h"
-#include "core/mls_forces.h"
 #include "core/model.h"
 #include "core/scene.h"
-#include "core/state.h"
-#include "core/step.h"
 
 namespace {
 
@@ -31,60 +28,6 @@ Finds the largest stable time step of the scene's integrator by bisection.
   --json            print one JSON object on stdout (progress stays on stderr)
   --quiet           no progress on stderr
 )";
-
-// A trial at time step dt is stable when, at every step of max(duration, 200 dt):
-//  - the state is finite (step() never reports non_finite),
-//  - no particle moves faster than kMaxSpeed,
-//  - the indentation stays in [-R, R],
-//  - the total energy (kinetic of body and indenter + strain energy) stays below
-//    10 x (initial energy + F |indenter travel|), checked every 1/50 of the run
-//    and at its end (the strain energy costs a force evaluation).
-constexpr long kMinSteps = 200;     // a slowly growing instability needs steps, not seconds, to show
-constexpr double kMaxSpeed = 10.0;  // m/s; the quasi-static runs stay below ~0.1 m/s
-const char* kDefinition =
-    "stable: over max(duration, 200 steps) from rest under the constant force F, no non-finite state, max particle speed <= 10 m/s, indentation in [-R, R], "
-    "and total energy (body + indenter kinetic + strain energy) <= 10 x (initial energy + F |travel|), "
-    "checked every 1/50 of the run and at its end";
-
-struct Trial {
-  bool stable = true;
-  std::string reason = "stable";
-  double final_indentation = 0;
-};
-
-double kinetic_energy(const Model& model, const State& s) {
-  double e = 0.5 * model.indenter_mass * s.indenter_velocity * s.indenter_velocity;
-  for (int i = 0; i < model.particle_count; ++i)
-    if (model.inverse_mass[i] != 0.0) e += 0.5 * model.mass[i] * s.velocity.col(i).squaredNorm();
-  return e;
-}
-
-Trial run_trial(const Scene& base, double dt, double force, double duration) {
-  Scene scene = base;
-  scene.integrator.dt = dt;
-  const Model model = build_model(scene);
-  State state = make_state(model);
-  state.force_command = force;
-  const double R = model.indenter_radius;
-  const double z0 = state.indenter_center[2];
-  const double e0 = kinetic_energy(model, state) + strain_energy(model, state.position);
-  const long steps = std::max(kMinSteps, std::lround(duration / dt));
-  const long check_every = std::max(1L, steps / 50);
-  Trial t;
-  for (long k = 1; k <= steps; ++k) {
-    if (step(model, state) == StepStatus::non_finite) return {false, "non-finite state", NAN};
-    const double d = indentation(model, state);
-    if (max_particle_speed(state) > kMaxSpeed) return {false, "particle speed above 10 m/s", d};
-    if (d < -R || d > R) return {false, "indentation outside [-R, R]", d};
-    if (k % check_every == 0 || k == steps) {
-      const double energy = kinetic_energy(model, state) + strain_energy(model, state.position);
-      const double bound = 10.0 * (e0 + std::abs(force * (state.indenter_center[2] - z0)));
-      if (!(energy <= bound)) return {false, "energy above 10 x (initial + work)", d};
-    }
-    t.final_indentation = d;
-  }
-  return t;
-}
 
 }  // namespace
 
@@ -136,51 +79,23 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "palpate-stable-dt: %s, %d particles, %s, F = %g N, %g s per trial\n", scene.name.c_str(),
                  model.particle_count, integrator, force, duration);
 
-  constexpr double dt_floor = 1e-5, dt_ceiling = 0.1;
+  // The trial and the search are bench/stability.h's (shared with palpate-stress).
+  stability::TrialSpec trial;
+  trial.force = force;
+  trial.duration = duration;
+  stability::SearchSpec search;
+  search.start = scene.integrator.dt;
+  search.tolerance = tolerance;
+  const double dt_floor = search.floor;
+  const std::string definition = stability::definition(trial);
   const auto start = std::chrono::steady_clock::now();
-  int trials = 0;
-  std::string failure;  // why the smallest unstable dt failed
-  double failure_dt = INFINITY;
-  auto stable = [&](double dt) {
-    const Trial t = run_trial(scene, dt, force, duration);
-    ++trials;
-    if (!t.stable && dt < failure_dt) {
-      failure_dt = dt;
-      failure = t.reason;
-    }
-    if (!quiet) std::fprintf(stderr, "  dt = %.4e s: %s (d = %.5f m)\n", dt, t.reason.c_str(), t.final_indentation);
-    return t.stable;
-  };
-  // Bracket [lo stable, hi unstable]: double up from the scene's dt, or halve down.
-  double lo = NAN, hi = NAN;
-  double dt = std::clamp(scene.integrator.dt, dt_floor, dt_ceiling);
-  if (stable(dt)) {
-    lo = dt;
-    while (lo < dt_ceiling) {
-      const double next = std::min(2 * lo, dt_ceiling);
-      if (!stable(next)) {
-        hi = next;
-        break;
-      }
-      lo = next;
-    }
-  } else {
-    hi = dt;
-    while (hi > dt_floor) {
-      const double next = std::max(0.5 * hi, dt_floor);
-      if (stable(next)) {
-        lo = next;
-        break;
-      }
-      hi = next;
-    }
-  }
-  // Geometric bisection of the bracket.
-  if (std::isfinite(lo) && std::isfinite(hi))
-    while (hi > (1 + tolerance) * lo) {
-      const double mid = std::sqrt(lo * hi);
-      (stable(mid) ? lo : hi) = mid;
-    }
+  const stability::Search found =
+      stability::find_stable_dt(model, trial, search, [&](double dt, const stability::Trial& t) {
+        if (!quiet) std::fprintf(stderr, "  dt = %.4e s: %s (d = %.5f m)\n", dt, t.reason.c_str(), t.final_indentation);
+      });
+  const double lo = found.dt_max_stable, hi = found.dt_min_unstable;
+  const int trials = found.trials;
+  const std::string& failure = found.unstable_because;
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const double courant = lo * model.wave_speed / model.min_spacing;  // NaN if nothing was stable
   auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
@@ -207,12 +122,12 @@ int main(int argc, char** argv) {
     out["tolerance"] = tolerance;
     out["trials"] = trials;
     out["wall_seconds"] = wall;
-    out["definition"] = kDefinition;
+    out["definition"] = definition;
     std::cout << out.dump(2) << "\n";
   } else {
     std::printf("\nstable time step, scene %s: %d particles, %s, F = %g N, %g s per trial\n", scene.name.c_str(),
                 model.particle_count, integrator, force, duration);
-    std::printf("  %s\n", kDefinition);
+    std::printf("  %s\n", definition.c_str());
     if (std::isfinite(lo))
       std::printf("  dt_max (largest stable)   %.4e s%s\n", lo, std::isfinite(hi) ? "" : " (the ceiling: nothing failed)");
     else
