@@ -1,30 +1,37 @@
 #include "core/time_step.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
 
 namespace palpate {
 
-double stability_constant(SolidKind solid, IntegratorType integrator) {
-  // Measured at the Hertz load (palpate-stable-dt, 1 % bisection tolerance), c = dt_max c_p / dx_min:
-  //                      uniform 18^3   graded 21^3
-  //   MLS      RK4          1.51          2.07
-  //   MLS      sympl. Euler 0.985         1.23
-  //   hex FEM  RK4          1.48          1.58
-  //   hex FEM  sympl. Euler 0.926         1.08
-  const bool mls = solid == SolidKind::mls;
-  switch (integrator) {
-    case IntegratorType::rk4: return mls ? 1.51 : 1.48;
-    case IntegratorType::symplectic_euler: return mls ? 0.985 : 0.926;
-    case IntegratorType::implicit_euler: return 0.0;
-  }
-  return 0.0;
+double stability_constant(SolidKind solid, IntegratorType integrator, DistributionType distribution) {
+  // c = dt_max c_p / dx_min measured at the Hertz load (palpate-stable-dt / palpate-stress,
+  // bisection to 1-2 %, damping 10 1/s; docs/stability.md):
+  //                           uniform 18^3   graded 21^3 (implicit: 11^3)
+  //   MLS      RK4               1.51          2.07
+  //   MLS      sympl. Euler      0.985         1.23
+  //   MLS      implicit Euler    1.07          1.05
+  //   hex FEM  RK4               1.48          1.58
+  //   hex FEM  sympl. Euler      0.926         1.08
+  //   hex FEM  implicit Euler    1.08          5.23
+  // Implicit Euler is limited too: the indenter's motion is coupled to the body through
+  // the contact solve, not inside the implicit system. Clouds other than these two
+  // (jittered, node files, meshes) get the smaller constant.
+  static constexpr double c[2][3][2] = {
+      {{1.51, 2.07}, {0.985, 1.23}, {1.07, 1.05}},   // MLS: rk4, symplectic Euler, implicit Euler
+      {{1.48, 1.58}, {0.926, 1.08}, {1.08, 5.23}}};  // hex FEM
+  const auto& pair = c[solid == SolidKind::mls ? 0 : 1][static_cast<int>(integrator)];
+  if (distribution == DistributionType::grid) return pair[0];
+  if (distribution == DistributionType::graded_grid) return pair[1];
+  return std::min(pair[0], pair[1]);
 }
 
 double stable_time_step(const Model& model) {
-  const double c = stability_constant(model.solid, model.scene.integrator.type);
-  if (c == 0.0) return INFINITY;
+  const double c =
+      stability_constant(model.solid, model.scene.integrator.type, model.scene.distribution.type);
   const double wave_speed =
       std::sqrt((model.lame_lambda + 2 * model.lame_mu + model.volume_stiffness) / model.scene.material.density);
   return c * model.min_spacing / wave_speed;
@@ -40,8 +47,9 @@ void check_time_step(const Model& model) {
                 "%.3g x %.4g m / %.4g m/s = %.4g s (docs/stability.md). Use a smaller dt, implicit_euler, or set "
                 "integrator.allow_unstable_dt to true to run anyway",
                 in.dt, to_string(in.type), model.scene.model.c_str(),
-                stability_constant(model.solid, in.type), model.min_spacing,
-                model.min_spacing * stability_constant(model.solid, in.type) / dt_max, dt_max);
+                stability_constant(model.solid, in.type, model.scene.distribution.type), model.min_spacing,
+                model.min_spacing * stability_constant(model.solid, in.type, model.scene.distribution.type) / dt_max,
+                dt_max);
   throw SceneError(model.scene.source, "/integrator/dt", text);
 }
 

@@ -1,20 +1,21 @@
 #pragma once
-// The stable time step of the explicit integrators (physics.md §1, "Time step"):
+// The stable time step of the integrators (physics.md §1, "Time step"):
 // dt_max = c * dx_min / c_p, with dx_min the smallest particle spacing (FEM: element
 // edge) and c_p = sqrt((lambda + 2 mu + k_v) / rho) the p-wave speed (the volume
 // term stiffens the dilatational wave). c was measured by bisection
 // (palpate-stable-dt, palpate-stress; docs/stability.md) for each model and
-// integrator on the uniform and the graded default clouds; the constant here is
-// the smaller of the two, so a scene inside it is inside the measured envelope.
+// integrator on the uniform and the graded default clouds (other clouds get the
+// smaller of the two), so a scene inside it is inside the measured envelope.
+// Implicit Euler has a limit too (time_step.cpp says why).
 #include "core/model.h"
 #include "core/scene.h"
 
 namespace palpate {
 
-// c of the envelope; 0 for implicit Euler (no explicit limit).
-double stability_constant(SolidKind solid, IntegratorType integrator);
+// c of the envelope.
+double stability_constant(SolidKind solid, IntegratorType integrator, DistributionType distribution);
 
-// dt_max of the model's integrator (infinity for implicit Euler), s.
+// dt_max of the model's integrator, s.
 double stable_time_step(const Model& model);
 
 // Throws SceneError on /integrator/dt when dt > stable_time_step(model), naming the

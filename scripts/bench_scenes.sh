@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Step cost of every default scene in one run (issue #6: the graded scenes against
+# the uniform 18^3): palpate-bench-step on each scene, one after the other on the
+# same build and machine, then one table (medians; ms per step; the ratio to the
+# uniform MLS scene; whether a step fits the 1 kHz budget of 1 ms).
+#
+#   scripts/bench_scenes.sh [--repeats N] [SCENE ...]   # default: scenes/hertz_cube*.json
+#
+# Environment: BUILD_DIR (default build). Writes the raw JSON lines to
+# $BUILD_DIR/bench_scenes.jsonl. Timing on a shared machine is noisy: compare
+# within one run.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD_DIR=${BUILD_DIR:-build}
+REPEATS=100
+if [[ "${1:-}" == "--repeats" ]]; then REPEATS=$2; shift 2; fi
+SCENES=("$@")
+[[ ${#SCENES[@]} -gt 0 ]] || SCENES=(scenes/hertz_cube.json scenes/hertz_cube_graded.json scenes/hertz_cube_tet.json
+                                      scenes/hertz_cube_fem.json scenes/hertz_cube_graded_fem.json)
+OUT="$BUILD_DIR/bench_scenes.jsonl"
+: > "$OUT"
+for scene in "${SCENES[@]}"; do
+  [[ -f "$scene" ]] || { echo "bench_scenes: no scene $scene" >&2; exit 2; }
+  echo "== $scene" >&2
+  "$BUILD_DIR/bin/palpate-bench-step" --scene "$scene" --repeats "$REPEATS" --ie-repeats 3 --json |
+    /usr/bin/python3 -c 'import json,sys; d=json.load(sys.stdin); d["scene_file"]=sys.argv[1]; print(json.dumps(d))' "$scene" >> "$OUT"
+done
+/usr/bin/python3 - "$OUT" <<'PY'
+import json, sys
+rows = [json.loads(l) for l in open(sys.argv[1])]
+base = next((r for r in rows if r["scene_file"].endswith("/hertz_cube.json")), rows[0])
+print(f"{'scene':36} {'model':8} {'particles':>9} {'RK4 ms':>8} {'SE ms':>8} {'IE ms':>9} {'force ms':>9} {'RK4/uniform':>12} {'1 kHz with':>12}")
+for r in rows:
+    fits = [name for name, key in (("RK4", "rk4_step_ms"), ("SE", "symplectic_euler_step_ms")) if r[key] < 1.0]
+    print(f"{r['scene_file']:36} {r['model']:8} {r['particles']:>9} {r['rk4_step_ms']:8.3f} {r['symplectic_euler_step_ms']:8.3f} "
+          f"{r['implicit_euler_step_ms']:9.2f} {r['force_eval_ms']:9.3f} {r['rk4_step_ms'] / base['rk4_step_ms']:12.2f} "
+          f"{', '.join(fits) or 'neither':>12}")
+print("\nmedians of one run, single thread; implicit Euler at dt = 0.01 s (3 repetitions); health checks included")
+PY
