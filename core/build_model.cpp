@@ -104,6 +104,7 @@ void set_material(Model& m) {
   m.lame_lambda = mat.young_modulus * mat.poisson_ratio / ((1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio));
   m.lame_mu = mat.young_modulus / (2 * (1 + mat.poisson_ratio));
   m.volume_stiffness = mat.volume_stiffness;
+  m.corotational = mat.law == MaterialLaw::corotational;
   m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / mat.density);
 }
 

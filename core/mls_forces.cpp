@@ -1,6 +1,7 @@
 #include "core/mls_forces.h"
 
 #include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -77,11 +78,62 @@ inline double hourglass_forces(const Model& m, const double* x, int i, const Mat
   return energy;
 }
 
+// The rotation R of the polar decomposition F = R U, by Higham's scaled Newton
+// iteration R <- 1/2 (g R + R^-T / g), g = |det R|^(-1/3) (R^-T = cof R / det R);
+// quadratic convergence, 4-6 iterations at the strains of a contact problem. An
+// inverted F (det F < 0) gives the nearest reflection; det F = 0 gives I.
+inline Mat3 polar_rotation(const Mat3& F) {
+  Mat3 R = F;
+  for (int it = 0; it < 30; ++it) {
+    const Mat3 C = cofactor(R);
+    const double det = R.col(0).dot(C.col(0));
+    if (!(std::abs(det) > 1e-300)) return Mat3::Identity();
+    const double g = std::pow(std::abs(det), -1.0 / 3.0);
+    const Mat3 next = 0.5 * (g * R + C / (g * det));
+    const double change = (next - R).squaredNorm();
+    R = next;
+    if (change < 1e-26) break;
+  }
+  return R;
+}
+
+// Corotational linear law: psi = mu |F - R|^2 + lambda/2 (tr(R^T F) - 3)^2, F = R U, the
+// linear isotropic energy of the Biot strain U - I. Its gradient is exactly
+// P = 2 mu (F - R) + lambda (tr(R^T F) - 3) R (the terms through dR vanish: R^T dR is
+// skew and U symmetric). Returns psi; R is returned for the tangent.
+inline double corotational_stress(const Mat3& F, double lambda, double mu, Mat3& P, Mat3& R) {
+  R = polar_rotation(F);
+  const double trace_strain = (R.transpose() * F).trace() - 3.0;
+  P = (2 * mu) * (F - R) + (lambda * trace_strain) * R;
+  return mu * (F - R).squaredNorm() + 0.5 * lambda * trace_strain * trace_strain;
+}
+
+// Its differential along dF: with A = R^T dF and U = R^T F, dR = R [w]x where
+// (tr U I - U) w = (A32 - A23, A13 - A31, A21 - A12); then
+// dP = 2 mu (dF - dR) + lambda tr(A) R + lambda (tr U - 3) dR.
+inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& dF, double lambda, double mu) {
+  const Mat3 A = R.transpose() * dF;
+  const Mat3 U = R.transpose() * F;
+  Mat3 K = -U;
+  K.diagonal().array() += U.trace();
+  const Vec3 w = K.inverse() * Vec3(A(2, 1) - A(1, 2), A(0, 2) - A(2, 0), A(1, 0) - A(0, 1));
+  Mat3 W;
+  W << 0, -w[2], w[1], w[2], 0, -w[0], -w[1], w[0], 0;
+  const Mat3 dR = R * W;
+  return (2 * mu) * (dF - dR) + (lambda * A.trace()) * R + (lambda * (U.trace() - 3.0)) * dR;
+}
+
 // First Piola stress P of particle i (elastic + volume term) and its energy density.
+// S_out receives what the tangent needs: S (St Venant-Kirchhoff) or R (corotational).
 inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out = nullptr) {
   Mat3 S;
-  double psi = stvk_stress(F, m.lame_lambda, m.lame_mu, S);
-  P = F * S;
+  double psi;
+  if (m.corotational) {
+    psi = corotational_stress(F, m.lame_lambda, m.lame_mu, P, S);
+  } else {
+    psi = stvk_stress(F, m.lame_lambda, m.lame_mu, S);
+    P = F * S;
+  }
   if (m.volume_stiffness > 0) {  // U = 1/2 k_v (det F - 1)^2, P += k_v (J - 1) cof(F)
     const Mat3 C = cofactor(F);
     const double J = F.col(0).dot(C.col(0));
@@ -137,12 +189,16 @@ void force_differential_per_particle(const Model& m, const double* cached_F, con
     const Vec3 dxi = Eigen::Map<const Vec3>(dx + 3 * i);
     for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a)
       dF += (Eigen::Map<const Vec3>(dx + 3 * idx[a]) - dxi) * Eigen::Map<const Vec3>(D + 3 * a).transpose();
-    // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS.
-    const Mat3 FtdF = F.transpose() * dF;
-    const Mat3 dE = 0.5 * (FtdF + FtdF.transpose());
-    Mat3 dS = (2 * m.lame_mu) * dE;
-    dS.diagonal().array() += m.lame_lambda * dE.trace();
-    Mat3 dP = dF * S + F * dS;
+    Mat3 dP;
+    if (m.corotational) {  // S holds R
+      dP = corotational_differential(F, S, dF, m.lame_lambda, m.lame_mu);
+    } else {  // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS.
+      const Mat3 FtdF = F.transpose() * dF;
+      const Mat3 dE = 0.5 * (FtdF + FtdF.transpose());
+      Mat3 dS = (2 * m.lame_mu) * dE;
+      dS.diagonal().array() += m.lame_lambda * dE.trace();
+      dP = dF * S + F * dS;
+    }
     if (m.volume_stiffness > 0) {  // d[k_v (J-1) cof F] = k_v [(cof F : dF) cof F + (J-1) d cof F]
       const Mat3 C = cofactor(F);
       const double J = F.col(0).dot(C.col(0));
@@ -358,6 +414,41 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
 
+// v_i P_i of the corotational law, one lane at a time (the polar decomposition
+// iterates a data-dependent number of times); the gather and scatter stay blocked.
+PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+  for (int l = 0; l < kLanes; ++l) {
+    Mat3 Fl, P;
+    for (int k = 0; k < 9; ++k) Fl(k % 3, k / 3) = F.m[k][l];
+    piola_stress(m, Fl, P);
+    for (int k = 0; k < 9; ++k) vP.m[k][l] = v[l] * P(k % 3, k / 3);
+  }
+}
+
+// v_i dP_i of the corotational law at (F_i, R_i) along dF_i, one lane at a time.
+PALPATE_INLINE void weighted_corotational_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& R,
+                                                       const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
+  for (int l = 0; l < kLanes; ++l) {
+    Mat3 Fl, Rl, dFl;
+    for (int k = 0; k < 9; ++k) {
+      Fl(k % 3, k / 3) = F.m[k][l];
+      Rl(k % 3, k / 3) = R.m[k][l];
+      dFl(k % 3, k / 3) = dF.m[k][l];
+    }
+    Mat3 dP = corotational_differential(Fl, Rl, dFl, m.lame_lambda, m.lame_mu);
+    if (m.volume_stiffness > 0) {
+      const Mat3 C = cofactor(Fl);
+      const double J = Fl.col(0).dot(C.col(0));
+      Mat3 dC;
+      dC.col(0) = dFl.col(1).cross(Fl.col(2)) + Fl.col(1).cross(dFl.col(2));
+      dC.col(1) = dFl.col(2).cross(Fl.col(0)) + Fl.col(2).cross(dFl.col(0));
+      dC.col(2) = dFl.col(0).cross(Fl.col(1)) + Fl.col(0).cross(dFl.col(1));
+      dP += m.volume_stiffness * ((C.array() * dFl.array()).sum() * C + (J - 1) * dC);
+    }
+    for (int k = 0; k < 9; ++k) vdP.m[k][l] = v[l] * dP(k % 3, k / 3);
+  }
+}
+
 template <bool volume_term>
 void internal_forces_blocked(const Model& m, const double* __restrict x, double* __restrict f) {
   const int n = m.particle_count;
@@ -372,7 +463,10 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
     for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
     add_gradient(begin, end, x, i, F);
     Mat3Lanes vP;
-    weighted_piola_stress<volume_term>(m, F, load(block.volume), vP);
+    if (m.corotational)
+      weighted_corotational_stress(m, F, load(block.volume), vP);
+    else
+      weighted_piola_stress<volume_term>(m, F, load(block.volume), vP);
     scatter_forces(block, begin, end, vP, i, std::min(kLanes, n - kLanes * b), f);
   }
 }
@@ -392,7 +486,10 @@ void force_differential_blocked(const Model& m, const double* cached_F, const do
     Mat3Lanes F, S, vdP;
     gather_matrices(cached_F, i, F);
     gather_matrices(cached_S, i, S);
-    weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
+    if (m.corotational)  // S holds R
+      weighted_corotational_differential(m, F, S, dF, load(block.volume), vdP);
+    else
+      weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
     scatter_forces(block, begin, end, vdP, i, std::min(kLanes, n - kLanes * b), df);
   }
 }
@@ -441,8 +538,8 @@ void linearize_forces(const Model& m, const Points& x, std::vector<double>& cach
   cached_S.resize(9 * static_cast<size_t>(m.particle_count));
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
-    Mat3 S;
-    stvk_stress(F, m.lame_lambda, m.lame_mu, S);
+    Mat3 P, S;
+    piola_stress(m, F, P, &S);  // S, or R for the corotational law
     Eigen::Map<Mat3> F_out(&cached_F[9 * static_cast<size_t>(i)]), S_out(&cached_S[9 * static_cast<size_t>(i)]);
     F_out = F;
     S_out = S;

@@ -65,6 +65,7 @@ struct Model {
   double lame_lambda = 0.0;       // Pa
   double lame_mu = 0.0;           // Pa
   double volume_stiffness = 0.0;  // k_v, Pa
+  bool corotational = false;      // MLS material law: corotational linear (else St Venant-Kirchhoff)
 
   // Indenter.
   double indenter_radius = 0.0;   // m

@@ -63,6 +63,7 @@ constexpr Named<IntegrationRule> kIntegrationRules[] = {
     {"consistent", IntegrationRule::consistent},
 };
 
+constexpr Named<MaterialLaw> kMaterialLaws[] = {{"stvk", MaterialLaw::stvk}, {"corotational", MaterialLaw::corotational}};
 constexpr Named<DistributionType> kDistributions[] = {
     {"grid", DistributionType::grid},
     {"jittered_grid", DistributionType::jittered_grid},
@@ -470,7 +471,8 @@ void read_hex_fem(const Reader& r, HexFemSpec& h) {
 }
 
 void read_material(const Reader& r, MaterialSpec& m) {
-  r.object({"young_modulus", "poisson_ratio", "density", "volume_stiffness"});
+  r.object({"young_modulus", "poisson_ratio", "density", "volume_stiffness", "law"});
+  r["law"].get(m.law, "material law", kMaterialLaws);
   r["young_modulus"].get(m.young_modulus, open_closed(0.0, 1e12));
   r["poisson_ratio"].get(m.poisson_ratio, open(-1.0, 0.5));
   r["density"].get(m.density, open_closed(0.0, 1e5));
@@ -557,6 +559,8 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
       s.distribution.type != DistributionType::graded_grid)
     r["body"]["distribution"]["type"].fail("the hex_fem model meshes a lattice: use a 'grid' or 'graded_grid' distribution");
   read_material(r["material"], s.material);
+  if (s.model == "hex_fem" && s.material.law != MaterialLaw::stvk)
+    r["material"]["law"].fail("applies to the mls model; the hex_fem model's law is hex_fem.formulation");
   read_fixed(r["fixed"], s.fixed_faces);
   read_indenter(r["indenter"], s.indenter);
   if (s.distribution.type == DistributionType::graded_grid) check_graded_grid(r["body"]["distribution"], s);

@@ -37,6 +37,9 @@ enum class SupportRule { mean_distance, kth_distance };
 // integration constraint sum_i v_i g_ij = 0 at interior nodes (consistent_integration.h).
 enum class IntegrationRule { nodal, consistent };
 enum class IntegratorType { rk4, symplectic_euler, implicit_euler };
+// The MLS solid's material law: St Venant-Kirchhoff (A-4, A-5, the paper's), or the
+// corotational linear law psi = mu |F - R|^2 + lambda/2 (tr(R^T F) - 3)^2 (F = R U).
+enum class MaterialLaw { stvk, corotational };
 
 // Faces of the body's box, as bits of Scene::fixed_faces.
 enum Face : uint32_t {
@@ -92,6 +95,7 @@ struct MaterialSpec {
   double poisson_ratio = 0.3;
   double density = 1000.0;        // kg/m^3
   double volume_stiffness = 0.0;  // k_v of the volume-restoring term, Pa; 0 = off
+  MaterialLaw law = MaterialLaw::stvk;  // MLS: the strain-energy density (mls_forces.h)
 };
 
 struct IndenterSpec {

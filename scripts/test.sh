@@ -31,18 +31,19 @@ step() { echo "== test.sh --sanitize: $* ($(date +%T))"; }
 step "ASan + UBSan build (build-asan)"
 cmake -S . -B build-asan "${flags[@]}" -DPALPATE_SANITIZE=address,undefined >/dev/null
 cmake --build build-asan -j"$jobs"
-# The stalled-client e2e test holds a 1 kHz session to wall-clock rate limits that a
-# sanitized build cannot meet on 2 cores (it took 441 s and failed once under ASan);
-# it runs in the Release suite.
-(cd build-asan && GTEST_FILTER='-ServerE2E.StalledAndVanishingClientsCostOthersNothing' \
-  ctest --output-on-failure -j"$jobs")
+# Wall-clock tests stay in the Release suite: the stalled-client e2e test holds a
+# 1 kHz session to rate limits a sanitized build cannot meet on 2 cores (441 s, failed
+# once under ASan); the command-latency test expects the sphere back in contact
+# within 100 ms of wall time (failed once under ASan: it had not landed yet); the
+# palpate-stress smoke run outgrows its 120 s limit at ASan's speed.
+wall_clock='-ServerE2E.StalledAndVanishingClientsCostOthersNothing:ServerE2E.ForceCommandReachesTheStreamWithinTwoTicks'
+(cd build-asan && GTEST_FILTER="$wall_clock" ctest --output-on-failure -j"$jobs" -E '^stress_smoke$')
 
 step "TSan build of the server and its e2e test (build-tsan)"
 cmake -S . -B build-tsan "${flags[@]}" -DPALPATE_SANITIZE=thread >/dev/null
 cmake --build build-tsan -j"$jobs" --target palpate-server server_e2e_test
 # The same for ThreadSanitizer (5-15x slower).
-(cd build-tsan && GTEST_FILTER='-ServerE2E.StalledAndVanishingClientsCostOthersNothing' \
-  ctest --output-on-failure -R '^server_e2e$')
+(cd build-tsan && GTEST_FILTER="$wall_clock" ctest --output-on-failure -R '^server_e2e$')
 
 step "libFuzzer targets (build-fuzz, clang)"
 CC=clang CXX=clang++ cmake -S . -B build-fuzz "${flags[@]}" -DPALPATE_FUZZ=ON \

@@ -18,7 +18,7 @@
 #include "core/solid.h"
 #include "core/state.h"
 #include "core/step.h"
-#include "tests/test_util.h"
+#include "test_util.h"
 
 namespace palpate {
 namespace {

@@ -216,6 +216,64 @@ TEST(MlsSolid, ForceDifferentialMatchesFiniteDifferences) {
   EXPECT_NEAR((dy.array() * df.array()).sum(), (dx.array() * dfy.array()).sum(), 1e-9 * df.norm() * dy.norm());
 }
 
+// The corotational law (material.law "corotational"): the linear isotropic law of the
+// Biot strain U - I, rotated. Independent truths: a pure stretch gives exactly the
+// small-strain stress of that strain (no softening in compression, unlike St Venant-
+// Kirchhoff); a rotated stretch gives the rotated stress; rigid motions are force free;
+// forces are the negative energy gradient; the tangent matches finite differences.
+const std::string kCorotational = R"(, "law": "corotational")";
+
+TEST(Corotational, StretchGivesTheLinearLawAndRotationsRotateIt) {
+  const Model m = test::model_from_json(cloud_scene(kGrid, "", kCorotational));
+  const double lambda = m.lame_lambda, mu = m.lame_mu;
+  for (double e : {-0.3, -0.01, 0.01, 0.3}) {
+    Mat3 F = Mat3::Identity();
+    F(0, 0) = 1 + e;
+    Mat3 P;
+    const double psi = first_piola_stress(m, F, P);
+    EXPECT_NEAR(P(0, 0), (lambda + 2 * mu) * e, 1e-9);
+    EXPECT_NEAR(P(1, 1), lambda * e, 1e-9);
+    EXPECT_NEAR(P(0, 1), 0.0, 1e-12);
+    EXPECT_NEAR(psi, 0.5 * (lambda + 2 * mu) * e * e, 1e-9);
+    const Mat3 Q = Eigen::AngleAxisd(1.1, Vec3(0.3, -1, 0.5).normalized()).toRotationMatrix();
+    Mat3 P_rot;
+    EXPECT_NEAR(first_piola_stress(m, Q * F, P_rot), psi, 1e-9);  // rotated body: P -> Q P
+    EXPECT_LT((P_rot - Q * P).norm(), 1e-9);
+  }
+}
+
+TEST(Corotational, RigidMotionIsForceFree) {
+  const Model m = test::model_from_json(cloud_scene(kJittered, "", kCorotational));
+  const Mat3 R = Eigen::AngleAxisd(2.5, Vec3(1, -2, 3).normalized()).toRotationMatrix();
+  Points x(3, m.particle_count);
+  for (int i = 0; i < m.particle_count; ++i) x.col(i) = R * m.rest_position.col(i) + Vec3(0.3, -1, 2);
+  Points f(3, m.particle_count);
+  internal_forces(m, x, f);
+  EXPECT_LT(f.cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_NEAR(strain_energy(m, x), 0.0, 1e-14);
+}
+
+TEST(Corotational, ForcesAreNegativeEnergyGradient) {
+  expect_forces_are_energy_gradient(
+      test::model_from_json(cloud_scene(kJittered, "", kCorotational + R"(, "volume_stiffness": 700)")), 0.05);
+  const Model m = test::model_from_json(cloud_scene(kJittered, "", kCorotational));
+  expect_no_net_force_or_torque(m, m.rest_position + random_displacement(m, 0.05, 11));
+}
+
+TEST(Corotational, ForceDifferentialMatchesFiniteDifferences) {
+  const Model m = test::model_from_json(cloud_scene(kJittered, "", kCorotational));
+  const Points x = m.rest_position + random_displacement(m, 0.08, 5);
+  const Points dx = random_displacement(m, 1.0, 9);
+  std::vector<double> F, S;
+  linearize_forces(m, x, F, S);
+  Points df(3, m.particle_count), fp(3, m.particle_count), fm(3, m.particle_count);
+  force_differential(m, F, S, dx, df);
+  const double h = 1e-6;
+  internal_forces(m, x + h * dx, fp);
+  internal_forces(m, x - h * dx, fm);
+  EXPECT_LT((df - (fp - fm) / (2 * h)).norm(), 1e-6 * df.norm());
+}
+
 TEST(MlsSolid, VolumesFollowTheKernelSumsAndTheLattice) {
   const Model lattice = test::model_from_json(cloud_scene(kGrid, R"(, "volumes": "lattice")"));
   EXPECT_NEAR(lattice.total_volume, 1.0, 1e-12);

@@ -1,6 +1,7 @@
 // Scene files: defaults, the shipped scene, every kind of error (field pointer and
 // reason), overrides and fixed faces.
 #include "core/scene.h"
+#include "test_util.h"
 
 #include <gtest/gtest.h>
 
@@ -238,7 +239,7 @@ TEST(SceneErrors, UnknownTopLevelField) {
 TEST(SceneErrors, UnknownNestedField) {
   const SceneError e = error_of(R"({"material": {"youngs_modulus": 5000}})");
   EXPECT_EQ(e.field(), "/material/youngs_modulus");
-  EXPECT_EQ(e.reason(), "unknown field (known: young_modulus, poisson_ratio, density, volume_stiffness)");
+  EXPECT_EQ(e.reason(), "unknown field (known: young_modulus, poisson_ratio, density, volume_stiffness, law)");
 
   const SceneError deep = error_of(R"({"verify": {"rest": {"timeout": 5}}})");
   EXPECT_EQ(deep.field(), "/verify/rest/timeout");
@@ -647,6 +648,31 @@ TEST(SceneHexFem, RejectsNonLatticeCloudsAndUnknownFormulations) {
   } catch (const SceneError& e) {
     EXPECT_EQ(e.field(), "/hex_fem/formulation");
     EXPECT_NE(e.reason().find("linear, corotational"), std::string::npos) << e.reason();
+  }
+}
+
+}  // namespace
+}  // namespace palpate
+
+namespace palpate {
+namespace {
+
+TEST(SceneMaterialLaw, CorotationalIsAnMlsLawAndUnknownLawsAreNamed) {
+  const Scene s = test::scene_from_json(R"({"material": {"law": "corotational"}})");
+  EXPECT_EQ(s.material.law, MaterialLaw::corotational);
+  EXPECT_EQ(test::scene_from_json("{}").material.law, MaterialLaw::stvk);
+  try {
+    test::scene_from_json(R"({"material": {"law": "neo_hookean"}})");
+    FAIL() << "an unknown law was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/material/law");
+    EXPECT_EQ(e.reason(), "unknown material law 'neo_hookean' (known: stvk, corotational)");
+  }
+  try {
+    test::scene_from_json(R"({"model": "hex_fem", "material": {"law": "corotational"}})");
+    FAIL() << "the hex FEM took an MLS law";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/material/law");
   }
 }
 
