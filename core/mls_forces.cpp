@@ -84,15 +84,17 @@ inline double hourglass_forces(const Model& m, const double* x, int i, const Mat
 // inverted F (det F < 0) gives the nearest reflection; det F = 0 gives I.
 inline Mat3 polar_rotation(const Mat3& F) {
   Mat3 R = F;
+  bool scaled = true;  // scaling pays only far from convergence
   for (int it = 0; it < 30; ++it) {
     const Mat3 C = cofactor(R);
     const double det = R.col(0).dot(C.col(0));
     if (!(std::abs(det) > 1e-300)) return Mat3::Identity();
-    const double g = std::pow(std::abs(det), -1.0 / 3.0);
+    const double g = scaled ? 1.0 / std::cbrt(std::abs(det)) : 1.0;
     const Mat3 next = 0.5 * (g * R + C / (g * det));
     const double change = (next - R).squaredNorm();
     R = next;
-    if (change < 1e-26) break;
+    if (change < 1e-24) break;
+    scaled = change > 1e-4;
   }
   return R;
 }
