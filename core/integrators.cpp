@@ -106,12 +106,32 @@ struct Rk4Stage {
   double h, weight;
   bool first;
   template <class T>
-  void operator()(int k, const T& a) const {
+  void operator()(int k, const T& a, const T& /*mass*/) const {
     const T v = load<T>(v_in + k);
     store(x_sum + k, first ? v : load<T>(x_sum + k) + weight * v);
     store(v_sum + k, first ? a : load<T>(v_sum + k) + weight * a);
     store(x_next + k, load<T>(x0 + k) + h * v);
     store(v_next + k, load<T>(v0 + k) + h * a);
+  }
+};
+
+// Sums the health checks need (health.h), taken in the last update pass while the
+// new values are in registers: sum m v^2 and sum x over the coordinates.
+struct MotionSums {
+  Lanes kinetic_lanes = {}, position_lanes = {};
+  double kinetic = 0.0, position = 0.0;
+  void add(const Lanes& m, const Lanes& v, const Lanes& x) {
+    kinetic_lanes += m * v * v;
+    position_lanes += x;
+  }
+  void add(double m, double v, double x) {
+    kinetic += m * v * v;
+    position += x;
+  }
+  void write(Workspace& w) const {
+    w.free_motion_kinetic = 0.5 * (kinetic + (kinetic_lanes[0] + kinetic_lanes[1]) + (kinetic_lanes[2] + kinetic_lanes[3]));
+    w.free_motion_position_sum = position + (position_lanes[0] + position_lanes[1]) + (position_lanes[2] + position_lanes[3]);
+    w.free_motion_sums_valid = true;
   }
 };
 
@@ -123,10 +143,14 @@ struct Rk4Update {
   double* x;
   double* v;
   double dt_6;
+  MotionSums* sums;
   template <class T>
-  void operator()(int k, const T& a) const {
-    store(x + k, load<T>(x + k) + dt_6 * (load<T>(x_sum + k) + load<T>(v4 + k)));
-    store(v + k, load<T>(v + k) + dt_6 * (load<T>(v_sum + k) + a));
+  void operator()(int k, const T& a, const T& mass) const {
+    const T x_new = load<T>(x + k) + dt_6 * (load<T>(x_sum + k) + load<T>(v4 + k));
+    const T v_new = load<T>(v + k) + dt_6 * (load<T>(v_sum + k) + a);
+    store(x + k, x_new);
+    store(v + k, v_new);
+    sums->add(mass, v_new, x_new);
   }
 };
 
@@ -135,27 +159,34 @@ struct SymplecticEulerUpdate {
   double* x;
   double* v;
   double dt;
+  MotionSums* sums;
   template <class T>
-  void operator()(int k, const T& a) const {
+  void operator()(int k, const T& a, const T& mass) const {
     const T v_new = load<T>(v + k) + dt * a;
+    const T x_new = load<T>(x + k) + dt * v_new;
     store(v + k, v_new);
-    store(x + k, load<T>(x + k) + dt * v_new);
+    store(x + k, x_new);
+    sums->add(mass, v_new, x_new);
   }
 };
 
-// Calls update(k, a_k) for every coordinate k with the acceleration a(f, v) there.
+// Calls update(k, a_k, m_k) for every coordinate k with the acceleration a(f, v) there
+// and the particle's mass.
 template <class Update>
 void for_each_acceleration(const Model& model, const double* f, const double* v, const Update& update) {
   const Acceleration accel(model);
   const int n = model.particle_count, groups = n / kGroup;
+  const double* mass = model.mass.data();
   for (int p = 0; p < groups; ++p) {
     Lanes a[3];
     group_accelerations(accel, p, f, v, a);
-    for (int q = 0; q < 3; ++q) update(3 * kGroup * p + kGroup * q, a[q]);
+    const double* m = mass + kGroup * p;
+    const Lanes m_lanes[3] = {Lanes{m[0], m[0], m[0], m[1]}, Lanes{m[1], m[1], m[2], m[2]}, Lanes{m[2], m[3], m[3], m[3]}};
+    for (int q = 0; q < 3; ++q) update(3 * kGroup * p + kGroup * q, a[q], m_lanes[q]);
   }
   for (int i = kGroup * groups; i < n; ++i) {
     const Vec3 a = accel(i, f + 3 * i, v + 3 * i);
-    for (int c = 0; c < 3; ++c) update(3 * i + c, a[c]);
+    for (int c = 0; c < 3; ++c) update(3 * i + c, a[c], mass[i]);
   }
 }
 
@@ -186,9 +217,11 @@ void free_motion_rk4(const Model& model, State& state) {
   }
   elastic_forces(model, x_stage, w.force);
   add_contact_forces(state, w.force);
+  MotionSums sums;
   const Rk4Update update{v_stage.data(), x_sum.data(), v_sum.data(), state.position.data(), state.velocity.data(),
-                         dt / 6.0};
+                         dt / 6.0, &sums};
   for_each_acceleration(model, w.force.data(), v_stage.data(), update);
+  sums.write(w);
   indenter_free_motion(model, state, dt);
 }
 
@@ -197,8 +230,10 @@ void free_motion_symplectic_euler(const Model& model, State& state) {
   Workspace& w = state.work;
   elastic_forces(model, state.position, w.force);
   add_contact_forces(state, w.force);
-  const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt};
+  MotionSums sums;
+  const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt, &sums};
   for_each_acceleration(model, w.force.data(), state.velocity.data(), update);
+  sums.write(w);
   state.indenter_velocity += dt * indenter_free_acceleration(model, state);
   state.indenter_center[2] += dt * state.indenter_velocity;
 }

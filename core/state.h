@@ -16,6 +16,10 @@ struct Workspace {
   Points force;                        // 3 x n
   Points rk_x[4], rk_v[4];             // RK4 stage slopes
   Points x0, v0;                       // start-of-step copies
+  // Written by the explicit free-motion stages for the health checks (health.h):
+  // 1/2 sum m v^2 of the body and sum of all coordinates after the update (before contact).
+  double free_motion_kinetic = 0.0, free_motion_position_sum = 0.0;
+  bool free_motion_sums_valid = false;
   // Implicit Euler (allocated only for that integrator)
   Points cg_r, cg_p, cg_z, cg_Ap, rhs, dv;
   std::vector<double> cached_F, cached_S;  // 9 x n each: linearisation point of the tangent stiffness
