@@ -85,6 +85,8 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
     s.distribution.focus_given = false;
     s.distribution.first_spacing =
         family_first_spacing(height, options.base_per_edge, options.base_first_spacing, per_edge);
+    s.material.law = MaterialLaw::stvk;       // the hex FEM has its own (linear) law
+    s.integrator.allow_unstable_dt = true;    // a static solve: no time step to be stable
     const Model model = build_model(s);
     LinearStaticContact solver(model);
     ReferenceLevel level;

@@ -121,6 +121,21 @@ TEST(Richardson, RecoversOrderAndLimitOfASyntheticSequence) {
 // Hertz solution allows (physics.md §3): fixed side walls make the block stiffer
 // (shallower) than the layer by a few per cent, the sphere against Hertz's paraboloid
 // makes it deeper by at most ~1.3 % at d/R = 0.2.
+// The reference is a static solve: the scene's integrator and dt play no part, so a
+// time step outside the envelope of the fine reference lattices must not refuse it
+// (it did: a corotational MLS scene at symplectic Euler 4 ms with E raised).
+TEST(FiniteBlockReference, IgnoresTheScenesTimeStepAndLaw) {
+  const Scene scene = test::scene_from_json(
+      R"({"material": {"young_modulus": 1e7, "law": "corotational"},
+          "integrator": {"type": "symplectic_euler", "dt": 0.004}})");
+  ReferenceOptions options;
+  options.levels = {5, 7, 9};
+  const Reference ref = finite_cube_reference(scene, {1e4}, options);
+  ASSERT_EQ(ref.indentation.size(), 1u);
+  EXPECT_GT(ref.indentation[0], 0.0);
+  EXPECT_THROW(build_model(scene), SceneError);  // the scene itself is outside it
+}
+
 TEST(FiniteBlockReference, RefinedFemConvergesAndMatchesTheFiniteLayer) {
   const Scene scene = test::scene_from_json("{}");
   const std::vector<double> forces = {10.36, 53.83, 152.3, 327.6};
