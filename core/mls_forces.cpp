@@ -125,6 +125,18 @@ inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& 
   return (2 * mu) * (dF - dR) + (lambda * A.trace()) * R + (lambda * (U.trace() - 3.0)) * dR;
 }
 
+// Differential of the volume term's stress k_v (J - 1) cof F along dF:
+// k_v [(cof F : dF) cof F + (J - 1) d cof F], d cof F from the columns crossed pairwise.
+inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volume_stiffness) {
+  const Mat3 C = cofactor(F);
+  const double J = F.col(0).dot(C.col(0));
+  Mat3 dC;
+  dC.col(0) = dF.col(1).cross(F.col(2)) + F.col(1).cross(dF.col(2));
+  dC.col(1) = dF.col(2).cross(F.col(0)) + F.col(2).cross(dF.col(0));
+  dC.col(2) = dF.col(0).cross(F.col(1)) + F.col(0).cross(dF.col(1));
+  return volume_stiffness * ((C.array() * dF.array()).sum() * C + (J - 1) * dC);
+}
+
 // First Piola stress P of particle i (elastic + volume term) and its energy density.
 // S_out receives what the tangent needs: S (St Venant-Kirchhoff) or R (corotational).
 inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out = nullptr) {
@@ -201,15 +213,7 @@ void force_differential_per_particle(const Model& m, const double* cached_F, con
       dS.diagonal().array() += m.lame_lambda * dE.trace();
       dP = dF * S + F * dS;
     }
-    if (m.volume_stiffness > 0) {  // d[k_v (J-1) cof F] = k_v [(cof F : dF) cof F + (J-1) d cof F]
-      const Mat3 C = cofactor(F);
-      const double J = F.col(0).dot(C.col(0));
-      Mat3 dC;
-      dC.col(0) = dF.col(1).cross(F.col(2)) + F.col(1).cross(dF.col(2));
-      dC.col(1) = dF.col(2).cross(F.col(0)) + F.col(2).cross(dF.col(0));
-      dC.col(2) = dF.col(0).cross(F.col(1)) + F.col(0).cross(dF.col(1));
-      dP += m.volume_stiffness * ((C.array() * dF.array()).sum() * C + (J - 1) * dC);
-    }
+    if (m.volume_stiffness > 0) dP += volume_term_differential(F, dF, m.volume_stiffness);
     Mat3 vdP = m.volume[i] * dP;
     if (!m.hourglass_weight.empty()) {  // the hourglass energy is quadratic: same form with (dx, dF)
       Mat3 G;
@@ -438,15 +442,7 @@ PALPATE_INLINE void weighted_corotational_differential(const Model& m, const Mat
       dFl(k % 3, k / 3) = dF.m[k][l];
     }
     Mat3 dP = corotational_differential(Fl, Rl, dFl, m.lame_lambda, m.lame_mu);
-    if (m.volume_stiffness > 0) {
-      const Mat3 C = cofactor(Fl);
-      const double J = Fl.col(0).dot(C.col(0));
-      Mat3 dC;
-      dC.col(0) = dFl.col(1).cross(Fl.col(2)) + Fl.col(1).cross(dFl.col(2));
-      dC.col(1) = dFl.col(2).cross(Fl.col(0)) + Fl.col(2).cross(dFl.col(0));
-      dC.col(2) = dFl.col(0).cross(Fl.col(1)) + Fl.col(0).cross(dFl.col(1));
-      dP += m.volume_stiffness * ((C.array() * dFl.array()).sum() * C + (J - 1) * dC);
-    }
+    if (m.volume_stiffness > 0) dP += volume_term_differential(Fl, dFl, m.volume_stiffness);
     for (int k = 0; k < 9; ++k) vdP.m[k][l] = v[l] * dP(k % 3, k / 3);
   }
 }
