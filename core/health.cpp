@@ -31,8 +31,12 @@ EnergyPass energy_pass(const Model& model, const State& state) {
               0.5 * model.indenter_mass * state.indenter_velocity * state.indenter_velocity;
   e.position_sum = state.position.sum();
   const Vec3& g = model.scene.gravity;
-  if (g.squaredNorm() > 0)
-    e.gravity_potential = (g.transpose() * state.position).dot(mass.transpose()) + model.indenter_mass * g.dot(state.indenter_center);
+  if (g.squaredNorm() > 0) {  // a plain loop: the matrix product would allocate a 1 x n temporary
+    const double* x = state.position.data();
+    double potential = 0.0;
+    for (int i = 0; i < n; ++i) potential += mass[i] * (g[0] * x[3 * i] + g[1] * x[3 * i + 1] + g[2] * x[3 * i + 2]);
+    e.gravity_potential = potential + model.indenter_mass * g.dot(state.indenter_center);
+  }
   return e;
 }
 

@@ -73,7 +73,7 @@ PressResult press_to_rest(const Model& model, State& state, double force, Observ
   for (; result.steps < max_steps && !result.at_rest;) {
     result.status = step(model, state);
     ++result.steps;
-    if (result.status != StepStatus::ok && result.status != StepStatus::contact_not_converged) {
+    if (is_fault(result.status)) {
       result.failure = state.health.report;
       last_good.restore(state);
       result.indentation = indentation(model, state);

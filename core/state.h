@@ -49,6 +49,10 @@ enum class StepStatus {
   inverted_particle,      // det F <= 0 at a particle, without a volume term to undo it
 };
 
+// A failed health check (the state must go back to the last good one). A contact solve
+// that ran out of pivots is reported but keeps the state.
+inline bool is_fault(StepStatus s) { return s != StepStatus::ok && s != StepStatus::contact_not_converged; }
+
 // The last failed health check: what, where, when, and by how much.
 struct HealthReport {
   StepStatus status = StepStatus::ok;

@@ -29,12 +29,21 @@ double stability_constant(SolidKind solid, IntegratorType integrator, Distributi
   return std::min(pair[0], pair[1]);
 }
 
+namespace {
+
+// c_p with the volume term: sqrt((lambda + 2 mu + k_v) / rho), m/s.
+double envelope_wave_speed(const Model& model) {
+  return std::sqrt((model.lame_lambda + 2 * model.lame_mu + model.volume_stiffness) / model.scene.material.density);
+}
+
+double envelope_constant(const Model& model) {
+  return stability_constant(model.solid, model.scene.integrator.type, model.scene.distribution.type);
+}
+
+}  // namespace
+
 double stable_time_step(const Model& model) {
-  const double c =
-      stability_constant(model.solid, model.scene.integrator.type, model.scene.distribution.type);
-  const double wave_speed =
-      std::sqrt((model.lame_lambda + 2 * model.lame_mu + model.volume_stiffness) / model.scene.material.density);
-  return c * model.min_spacing / wave_speed;
+  return envelope_constant(model) * model.min_spacing / envelope_wave_speed(model);
 }
 
 void check_time_step(const Model& model) {
@@ -46,10 +55,8 @@ void check_time_step(const Model& model) {
                 "%g s is outside the measured stable envelope of %s with the %s model: dt <= c dx_min / c_p = "
                 "%.3g x %.4g m / %.4g m/s = %.4g s (docs/stability.md). Use a smaller dt, implicit_euler, or set "
                 "integrator.allow_unstable_dt to true to run anyway",
-                in.dt, to_string(in.type), model.scene.model.c_str(),
-                stability_constant(model.solid, in.type, model.scene.distribution.type), model.min_spacing,
-                model.min_spacing * stability_constant(model.solid, in.type, model.scene.distribution.type) / dt_max,
-                dt_max);
+                in.dt, to_string(in.type), model.scene.model.c_str(), envelope_constant(model), model.min_spacing,
+                envelope_wave_speed(model), dt_max);
   throw SceneError(model.scene.source, "/integrator/dt", text);
 }
 

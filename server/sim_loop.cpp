@@ -312,7 +312,7 @@ bool Simulation::tick_once() {
   if (ticks_since_recovery_ >= 0) ++ticks_since_recovery_;
 
   // A failed health check (health.h) or a state gone far away: back to the last good state.
-  if (status != StepStatus::ok && status != StepStatus::contact_not_converged) recover(describe(state.health.report));
+  if (is_fault(status)) recover(describe(state.health.report));
   else if (diverged(model, state)) recover("diverged state (displacement beyond 10 box diagonals)");
   else if (config_.checkpoint_interval > 0 && state.tick % config_.checkpoint_interval == 0) checkpoint_->save(state);
   return true;
