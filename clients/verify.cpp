@@ -262,6 +262,10 @@ int main(int argc, char** argv) {
     out["integration_residual"] = model.integration_residual;
     out["integration_residual_nodal"] = model.integration_residual_nodal;
     out["model"] = scene.model;
+    // The continuum simulated: the MLS material law, or the hex FEM formulation.
+    out["law"] = scene.model == "hex_fem" ? to_string(scene.hex_fem.formulation) : to_string(scene.material.law);
+    out["poisson_ratio"] = scene.material.poisson_ratio;
+    out["indenter_radius"] = scene.indenter.radius;
     out["total_volume"] = model.total_volume;
     out["box_volume"] = model.box_volume;
     out["integrator"] = to_string(scene.integrator.type);

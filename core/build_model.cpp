@@ -104,7 +104,7 @@ void set_material(Model& m) {
   m.lame_lambda = mat.young_modulus * mat.poisson_ratio / ((1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio));
   m.lame_mu = mat.young_modulus / (2 * (1 + mat.poisson_ratio));
   m.volume_stiffness = mat.volume_stiffness;
-  m.corotational = mat.law == MaterialLaw::corotational;
+  m.law = mat.law;
   m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / mat.density);
 }
 
@@ -269,7 +269,8 @@ void build_mls(Model& m, const NodeCloud& cloud) {
 // nodes' lattice volumes = the row sums of the consistent mass of trilinear bricks).
 void build_hex_fem(Model& m, const NodeCloud& cloud) {
   m.solid = SolidKind::hex_fem;
-  m.hex = hex_mesh(m.rest_position, cloud.lattice_size, m.lame_lambda, m.lame_mu, m.scene.hex_fem.formulation);
+  m.hex = hex_mesh(m.rest_position, cloud.lattice_size, m.lame_lambda, m.lame_mu, m.scene.hex_fem.formulation,
+                    m.scene.hex_fem.volumetric_integration);
   m.volume = cloud.lattice_volume;
   m.mass.resize(m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) m.mass[i] = m.scene.material.density * m.volume[i];

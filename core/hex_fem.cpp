@@ -29,18 +29,18 @@ inline ElementVector element_displacement(const Points& rest, const Points& x, c
 
 }  // namespace
 
-ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu) {
+ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu,
+                                    HexVolumetricIntegration volumetric) {
   // Isotropic elasticity in Voigt form (engineering shear strains): the shear
-  // entries are mu, not 2 mu.
-  Eigen::Matrix<double, 6, 6> C = Eigen::Matrix<double, 6, 6>::Zero();
-  C.topLeftCorner<3, 3>().setConstant(lambda);
-  C.topLeftCorner<3, 3>().diagonal().array() += 2 * mu;
-  C.bottomRightCorner<3, 3>().diagonal().setConstant(mu);
-  const double g = 1.0 / std::sqrt(3.0);
+  // entries are mu, not 2 mu. C = C_mu + C_lambda, C_lambda = lambda m m^T (m = [1 1 1 0 0 0]).
+  Eigen::Matrix<double, 6, 6> C_mu = Eigen::Matrix<double, 6, 6>::Zero();
+  C_mu.topLeftCorner<3, 3>().diagonal().setConstant(2 * mu);
+  C_mu.bottomRightCorner<3, 3>().diagonal().setConstant(mu);
+  Eigen::Matrix<double, 6, 6> C_lambda = Eigen::Matrix<double, 6, 6>::Zero();
+  C_lambda.topLeftCorner<3, 3>().setConstant(lambda);
   const double detJ = size.prod() / 8.0;  // the map from [-1, 1]^3
-  ElementMatrix K = ElementMatrix::Zero();
-  for (int q = 0; q < 8; ++q) {  // Gauss points (+-g)^3, weights 1
-    const double xi[3] = {g * kCorner[q][0], g * kCorner[q][1], g * kCorner[q][2]};
+  // B(xi): strain-displacement matrix at natural coordinates xi.
+  auto strain_matrix = [&](const double xi[3]) {
     Eigen::Matrix<double, 6, 24> B = Eigen::Matrix<double, 6, 24>::Zero();
     for (int a = 0; a < 8; ++a) {
       double dN[3];  // dN_a/dx_c = dN_a/dxi_c * 2 / h_c
@@ -60,13 +60,30 @@ ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, 
       B(5, 3 * a + 0) = dN[2];  // gamma_zx
       B(5, 3 * a + 2) = dN[0];
     }
-    K += B.transpose() * C * B * detJ;
+    return B;
+  };
+  const bool reduced = volumetric == HexVolumetricIntegration::reduced;
+  const Eigen::Matrix<double, 6, 6> C_gauss = reduced ? C_mu : Eigen::Matrix<double, 6, 6>(C_mu + C_lambda);
+  const double g = 1.0 / std::sqrt(3.0);
+  ElementMatrix K = ElementMatrix::Zero();
+  for (int q = 0; q < 8; ++q) {  // Gauss points (+-g)^3, weights 1
+    const double xi[3] = {g * kCorner[q][0], g * kCorner[q][1], g * kCorner[q][2]};
+    const Eigen::Matrix<double, 6, 24> B = strain_matrix(xi);
+    K += B.transpose() * C_gauss * B * detJ;
+  }
+  if (reduced) {
+    // Selective reduced integration (Hughes 1980): the lambda (volumetric) part at the
+    // centre with weight 8, the mean dilatation of the brick; no volumetric locking as
+    // nu -> 1/2, and the mu part keeps full rank (no hourglass modes).
+    const double centre[3] = {0.0, 0.0, 0.0};
+    const Eigen::Matrix<double, 6, 24> B0 = strain_matrix(centre);
+    K += B0.transpose() * C_lambda * B0 * (8.0 * detJ);
   }
   return 0.5 * (K + K.transpose());
 }
 
 HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lambda, double mu,
-                 HexFormulation formulation) {
+                 HexFormulation formulation, HexVolumetricIntegration volumetric) {
   const int nx = per_axis[0], ny = per_axis[1], nz = per_axis[2];
   if (static_cast<long>(nx) * ny * nz != rest.cols())
     throw std::invalid_argument("hex_mesh: node count does not match the lattice size");
@@ -90,7 +107,7 @@ HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lam
         auto [it, inserted] = type_of_size.emplace(key, static_cast<int>(mesh.element_size.size()));
         if (inserted) {
           mesh.element_size.push_back(size);
-          mesh.element_stiffness.push_back(hex_element_stiffness(size, lambda, mu));
+          mesh.element_stiffness.push_back(hex_element_stiffness(size, lambda, mu, volumetric));
         }
         mesh.element_nodes.push_back(nodes);
         mesh.element_type.push_back(it->second);

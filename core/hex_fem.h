@@ -29,13 +29,16 @@ struct HexMesh {
   std::vector<Eigen::Vector3d> element_size;      // edge lengths (hx, hy, hz) per distinct element size
 };
 
-// K_e of an hx x hy x hz brick, 2x2x2 Gauss points, Lame parameters lambda, mu.
-ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu);
+// K_e of an hx x hy x hz brick, Lame parameters lambda, mu: 2x2x2 Gauss points, or
+// (volumetric = reduced) the lambda part at the centre only (selective reduced integration).
+ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu,
+                                    HexVolumetricIntegration volumetric = HexVolumetricIntegration::full);
 
 // The mesh of a lattice with `per_axis` nodes per axis, node i = a + nx (b + ny c),
 // coordinates taken from `rest_position` (which may be graded along each axis).
 HexMesh hex_mesh(const Points& rest_position, const Eigen::Vector3i& per_axis, double lambda, double mu,
-                 HexFormulation formulation);
+                 HexFormulation formulation,
+                 HexVolumetricIntegration volumetric = HexVolumetricIntegration::full);
 
 // Rotation of an element from its current node positions (columns of F at the
 // centre, Gram-Schmidt on the x and y directions as SOFA's "large" method).

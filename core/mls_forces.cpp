@@ -25,6 +25,18 @@ inline double stvk_stress(const Mat3& F, double lambda, double mu, Mat3& S) {
   return 0.5 * (E.array() * S.array()).sum();
 }
 
+// Small-strain linear law (a verification law, not objective: rigid rotations strain it):
+// eps = sym(F) - I, psi = mu eps:eps + lambda/2 tr(eps)^2, P = 2 mu eps + lambda tr(eps) I,
+// the continuum of the linear hex FEM and of the finite-cube reference.
+inline double linear_stress(const Mat3& F, double lambda, double mu, Mat3& P) {
+  Mat3 eps = 0.5 * (F + F.transpose());
+  eps.diagonal().array() -= 1.0;
+  const double tr = eps.trace();
+  P = (2 * mu) * eps;
+  P.diagonal().array() += lambda * tr;
+  return mu * eps.squaredNorm() + 0.5 * lambda * tr * tr;
+}
+
 // Cofactor matrix cof(F) = det(F) F^-T: its columns are the columns of F crossed pairwise
 // (d det F / dF).
 inline Mat3 cofactor(const Mat3& F) {
@@ -140,13 +152,19 @@ inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volum
 // First Piola stress P of particle i (elastic + volume term) and its energy density.
 // S_out receives what the tangent needs: S (St Venant-Kirchhoff) or R (corotational).
 inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out = nullptr) {
-  Mat3 S;
-  double psi;
-  if (m.corotational) {
-    psi = corotational_stress(F, m.lame_lambda, m.lame_mu, P, S);
-  } else {
-    psi = stvk_stress(F, m.lame_lambda, m.lame_mu, S);
-    P = F * S;
+  Mat3 S = Mat3::Identity();
+  double psi = 0;
+  switch (m.law) {
+    case MaterialLaw::corotational:
+      psi = corotational_stress(F, m.lame_lambda, m.lame_mu, P, S);
+      break;
+    case MaterialLaw::linear:
+      psi = linear_stress(F, m.lame_lambda, m.lame_mu, P);
+      break;
+    case MaterialLaw::stvk:
+      psi = stvk_stress(F, m.lame_lambda, m.lame_mu, S);
+      P = F * S;
+      break;
   }
   if (m.volume_stiffness > 0) {  // U = 1/2 k_v (det F - 1)^2, P += k_v (J - 1) cof(F)
     const Mat3 C = cofactor(F);
@@ -156,6 +174,30 @@ inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out =
   }
   if (S_out) *S_out = S;
   return psi;
+}
+
+// dP of piola_stress at (F, S) along dF, S what piola_stress returned in S_out.
+inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, const Mat3& dF) {
+  Mat3 dP;
+  switch (m.law) {
+    case MaterialLaw::corotational:  // S holds R
+      dP = corotational_differential(F, S, dF, m.lame_lambda, m.lame_mu);
+      break;
+    case MaterialLaw::linear:  // dP = 2 mu sym(dF) + lambda tr(dF) I
+      dP = m.lame_mu * (dF + dF.transpose());
+      dP.diagonal().array() += m.lame_lambda * dF.trace();
+      break;
+    case MaterialLaw::stvk: {  // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS.
+      const Mat3 FtdF = F.transpose() * dF;
+      const Mat3 dE = 0.5 * (FtdF + FtdF.transpose());
+      Mat3 dS = (2 * m.lame_mu) * dE;
+      dS.diagonal().array() += m.lame_lambda * dE.trace();
+      dP = dF * S + F * dS;
+      break;
+    }
+  }
+  if (m.volume_stiffness > 0) dP += volume_term_differential(F, dF, m.volume_stiffness);
+  return dP;
 }
 
 // internal_forces one particle at a time (with hourglass control).
@@ -203,18 +245,7 @@ void force_differential_per_particle(const Model& m, const double* cached_F, con
     const Vec3 dxi = Eigen::Map<const Vec3>(dx + 3 * i);
     for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a)
       dF += (Eigen::Map<const Vec3>(dx + 3 * idx[a]) - dxi) * Eigen::Map<const Vec3>(D + 3 * a).transpose();
-    Mat3 dP;
-    if (m.corotational) {  // S holds R
-      dP = corotational_differential(F, S, dF, m.lame_lambda, m.lame_mu);
-    } else {  // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS.
-      const Mat3 FtdF = F.transpose() * dF;
-      const Mat3 dE = 0.5 * (FtdF + FtdF.transpose());
-      Mat3 dS = (2 * m.lame_mu) * dE;
-      dS.diagonal().array() += m.lame_lambda * dE.trace();
-      dP = dF * S + F * dS;
-    }
-    if (m.volume_stiffness > 0) dP += volume_term_differential(F, dF, m.volume_stiffness);
-    Mat3 vdP = m.volume[i] * dP;
+    Mat3 vdP = m.volume[i] * piola_differential(m, F, S, dF);
     if (!m.hourglass_weight.empty()) {  // the hourglass energy is quadratic: same form with (dx, dF)
       Mat3 G;
       hourglass_forces(m, dx, i, dF, G, df);
@@ -420,9 +451,9 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
 
-// v_i P_i of the corotational law, one lane at a time (the polar decomposition
-// iterates a data-dependent number of times); the gather and scatter stay blocked.
-PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+// v_i P_i of the laws other than St Venant-Kirchhoff, one lane at a time (the polar
+// decomposition iterates a data-dependent number of times); the gather and scatter stay blocked.
+PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
   for (int l = 0; l < kLanes; ++l) {
     Mat3 Fl, P;
     for (int k = 0; k < 9; ++k) Fl(k % 3, k / 3) = F.m[k][l];
@@ -431,18 +462,17 @@ PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes
   }
 }
 
-// v_i dP_i of the corotational law at (F_i, R_i) along dF_i, one lane at a time.
-PALPATE_INLINE void weighted_corotational_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& R,
-                                                       const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
+// v_i dP_i of the laws other than St Venant-Kirchhoff at (F_i, S_i) along dF_i, one lane at a time.
+PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lanes& F, const Mat3Lanes& S,
+                                                   const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
   for (int l = 0; l < kLanes; ++l) {
-    Mat3 Fl, Rl, dFl;
+    Mat3 Fl, Sl, dFl;
     for (int k = 0; k < 9; ++k) {
       Fl(k % 3, k / 3) = F.m[k][l];
-      Rl(k % 3, k / 3) = R.m[k][l];
+      Sl(k % 3, k / 3) = S.m[k][l];
       dFl(k % 3, k / 3) = dF.m[k][l];
     }
-    Mat3 dP = corotational_differential(Fl, Rl, dFl, m.lame_lambda, m.lame_mu);
-    if (m.volume_stiffness > 0) dP += volume_term_differential(Fl, dFl, m.volume_stiffness);
+    const Mat3 dP = piola_differential(m, Fl, Sl, dFl);
     for (int k = 0; k < 9; ++k) vdP.m[k][l] = v[l] * dP(k % 3, k / 3);
   }
 }
@@ -461,8 +491,8 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
     for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
     add_gradient(begin, end, x, i, F);
     Mat3Lanes vP;
-    if (m.corotational)
-      weighted_corotational_stress(m, F, load(block.volume), vP);
+    if (m.law != MaterialLaw::stvk)
+      weighted_stress_per_lane(m, F, load(block.volume), vP);
     else
       weighted_piola_stress<volume_term>(m, F, load(block.volume), vP);
     scatter_forces(block, begin, end, vP, i, std::min(kLanes, n - kLanes * b), f);
@@ -484,8 +514,8 @@ void force_differential_blocked(const Model& m, const double* cached_F, const do
     Mat3Lanes F, S, vdP;
     gather_matrices(cached_F, i, F);
     gather_matrices(cached_S, i, S);
-    if (m.corotational)  // S holds R
-      weighted_corotational_differential(m, F, S, dF, load(block.volume), vdP);
+    if (m.law != MaterialLaw::stvk)  // S holds R for the corotational law
+      weighted_differential_per_lane(m, F, S, dF, load(block.volume), vdP);
     else
       weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
     scatter_forces(block, begin, end, vdP, i, std::min(kLanes, n - kLanes * b), df);

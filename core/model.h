@@ -65,7 +65,7 @@ struct Model {
   double lame_lambda = 0.0;       // Pa
   double lame_mu = 0.0;           // Pa
   double volume_stiffness = 0.0;  // k_v, Pa
-  bool corotational = false;      // MLS material law: corotational linear (else St Venant-Kirchhoff)
+  MaterialLaw law = MaterialLaw::stvk;  // MLS material law (scene material.law)
 
   // Indenter.
   double indenter_radius = 0.0;   // m

@@ -53,6 +53,10 @@ constexpr Named<HexFormulation> kHexFormulations[] = {
     {"linear", HexFormulation::linear},
     {"corotational", HexFormulation::corotational},
 };
+constexpr Named<HexVolumetricIntegration> kHexVolumetricIntegrations[] = {
+    {"full", HexVolumetricIntegration::full},
+    {"reduced", HexVolumetricIntegration::reduced},
+};
 
 constexpr Named<SupportRule> kSupportRules[] = {
     {"mean_distance", SupportRule::mean_distance},
@@ -63,7 +67,8 @@ constexpr Named<IntegrationRule> kIntegrationRules[] = {
     {"consistent", IntegrationRule::consistent},
 };
 
-constexpr Named<MaterialLaw> kMaterialLaws[] = {{"stvk", MaterialLaw::stvk}, {"corotational", MaterialLaw::corotational}};
+constexpr Named<MaterialLaw> kMaterialLaws[] = {
+    {"stvk", MaterialLaw::stvk}, {"corotational", MaterialLaw::corotational}, {"linear", MaterialLaw::linear}};
 constexpr Named<DistributionType> kDistributions[] = {
     {"grid", DistributionType::grid},
     {"jittered_grid", DistributionType::jittered_grid},
@@ -466,8 +471,9 @@ void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
 }
 
 void read_hex_fem(const Reader& r, HexFemSpec& h) {
-  r.object({"formulation"});
+  r.object({"formulation", "volumetric_integration"});
   r["formulation"].get(h.formulation, "formulation", kHexFormulations);
+  r["volumetric_integration"].get(h.volumetric_integration, "volumetric integration", kHexVolumetricIntegrations);
 }
 
 void read_material(const Reader& r, MaterialSpec& m) {
@@ -688,6 +694,8 @@ Scene load_scene(const fs::path& file, const SceneOverrides& overrides) {
 }
 
 const char* to_string(IntegratorType t) { return name_for(kIntegrators, t); }
+const char* to_string(MaterialLaw l) { return name_for(kMaterialLaws, l); }
+const char* to_string(HexFormulation f) { return name_for(kHexFormulations, f); }
 const char* to_string(DistributionType t) { return name_for(kDistributions, t); }
 
 }  // namespace palpate

@@ -38,8 +38,9 @@ enum class SupportRule { mean_distance, kth_distance };
 enum class IntegrationRule { nodal, consistent };
 enum class IntegratorType { rk4, symplectic_euler, implicit_euler };
 // The MLS solid's material law: St Venant-Kirchhoff (A-4, A-5, the paper's), or the
-// corotational linear law psi = mu |F - R|^2 + lambda/2 (tr(R^T F) - 3)^2 (F = R U).
-enum class MaterialLaw { stvk, corotational };
+// corotational linear law psi = mu |F - R|^2 + lambda/2 (tr(R^T F) - 3)^2 (F = R U), or the
+// small-strain linear law (a verification law: the continuum of the linear hex FEM).
+enum class MaterialLaw { stvk, corotational, linear };
 
 // Faces of the body's box, as bits of Scene::fixed_faces.
 enum Face : uint32_t {
@@ -86,8 +87,13 @@ struct MlsSpec {
 
 // The hexahedral FEM reference model (model "hex_fem", physics.md §5).
 enum class HexFormulation { linear, corotational };
+// Quadrature of the volumetric (lambda) part of K_e: 2x2x2 Gauss points like the
+// rest ("full"), or one point at the centre ("reduced": selective reduced
+// integration, free of volumetric locking as nu -> 1/2).
+enum class HexVolumetricIntegration { full, reduced };
 struct HexFemSpec {
   HexFormulation formulation = HexFormulation::linear;  // small strain, or corotational ("large")
+  HexVolumetricIntegration volumetric_integration = HexVolumetricIntegration::full;
 };
 
 struct MaterialSpec {
@@ -173,6 +179,8 @@ Scene parse_scene(const std::string& json_text, const std::string& source_name,
                   const std::filesystem::path& base_dir, const SceneOverrides& overrides = {});
 
 const char* to_string(IntegratorType);
+const char* to_string(MaterialLaw);
+const char* to_string(HexFormulation);
 const char* to_string(DistributionType);
 
 }  // namespace palpate

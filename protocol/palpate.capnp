@@ -55,6 +55,10 @@ enum HexFormulation {
   linear @0;
   corotational @1;
 }
+enum HexVolumetricIntegration {
+  full @0;                       # 2x2x2 Gauss points like the rest of K_e
+  reduced @1;                    # the lambda part at the centre (selective reduced integration)
+}
 enum Face {
   bottom @0;                     # z = min.z
   top @1;                        # z = max.z
@@ -97,12 +101,19 @@ struct Mls {
 }
 struct HexFem {
   formulation @0 :HexFormulation = linear;
+  volumetricIntegration @1 :HexVolumetricIntegration = full $Json.name("volumetric_integration");
 }
 struct Material {
   youngModulus @0 :Float64 = 1e4 $Json.name("young_modulus");       # Pa, (0, 1e12]
   poissonRatio @1 :Float64 = 0.3 $Json.name("poisson_ratio");       # (-1, 0.5)
   density @2 :Float64 = 1000;                                        # kg/m^3, (0, 1e5]
   volumeStiffness @3 :Float64 = 0 $Json.name("volume_stiffness");   # Pa, [0, 1e12]
+  law @4 :MaterialLaw = stvk;                                        # the MLS strain-energy density
+}
+enum MaterialLaw {
+  stvk @0;                       # St Venant-Kirchhoff (the paper's)
+  corotational @1;               # linear law of the Biot strain, rotated
+  linear @2;                     # small strain (verification against the linear hex FEM)
 }
 struct Indenter {
   radius @0 :Float64 = 0.5;        # m, (0, 1000]

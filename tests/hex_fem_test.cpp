@@ -15,9 +15,15 @@ namespace {
 
 const double kLambda = 5769.23, kMu = 3846.15;  // E = 10 kPa, nu = 0.3
 
+constexpr HexVolumetricIntegration kIntegrations[] = {HexVolumetricIntegration::full,
+                                                      HexVolumetricIntegration::reduced};
+
 TEST(HexElement, SymmetricPositiveSemiDefiniteWithSixRigidModes) {
+  // Both volumetric integrations: the reduced one adds no zero-energy (hourglass) mode,
+  // because the mu part stays fully integrated.
+  for (const HexVolumetricIntegration integration : kIntegrations)
   for (const Vec3& size : {Vec3(1, 1, 1), Vec3(0.1, 0.25, 0.05)}) {
-    const ElementMatrix K = hex_element_stiffness(size, kLambda, kMu);
+    const ElementMatrix K = hex_element_stiffness(size, kLambda, kMu, integration);
     EXPECT_LT((K - K.transpose()).norm(), 1e-12 * K.norm());
     Eigen::SelfAdjointEigenSolver<ElementMatrix> eig(K);
     const auto ev = eig.eigenvalues();
@@ -34,7 +40,8 @@ TEST(HexElement, SymmetricPositiveSemiDefiniteWithSixRigidModes) {
 TEST(HexElement, UniaxialStrainEnergyIsExact) {
   // u = eps x on a brick: energy 1/2 (lambda + 2 mu) eps^2 V, independent of the element.
   const Vec3 size(0.3, 0.2, 0.5);
-  const ElementMatrix K = hex_element_stiffness(size, kLambda, kMu);
+  for (const HexVolumetricIntegration integration : kIntegrations) {
+  const ElementMatrix K = hex_element_stiffness(size, kLambda, kMu, integration);
   const int corner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
   const double eps = 0.01, gamma = 0.02;
   Eigen::Matrix<double, 24, 1> u_axial, u_shear;
@@ -46,18 +53,21 @@ TEST(HexElement, UniaxialStrainEnergyIsExact) {
   const double V = size.prod();
   EXPECT_NEAR(0.5 * u_axial.dot(K * u_axial), 0.5 * (kLambda + 2 * kMu) * eps * eps * V, 1e-12 * kMu * V);
   EXPECT_NEAR(0.5 * u_shear.dot(K * u_shear), 0.5 * kMu * gamma * gamma * V, 1e-12 * kMu * V);
+  }
 }
 
 // A 4 x 4 x 4 node lattice (27 elements) on a skewed box.
 struct SmallMesh {
   NodeCloud cloud;
   HexMesh mesh;
-  explicit SmallMesh(HexFormulation formulation) {
+  explicit SmallMesh(HexFormulation formulation,
+                     HexVolumetricIntegration integration = HexVolumetricIntegration::full,
+                     double lambda = kLambda) {
     BoxSpec box;
     box.min = Vec3(0, 0, 0);
     box.max = Vec3(1.0, 0.6, 0.8);
     cloud = grid_nodes(box, Eigen::Vector3i(4, 4, 4));
-    mesh = hex_mesh(cloud.positions, cloud.lattice_size, kLambda, kMu, formulation);
+    mesh = hex_mesh(cloud.positions, cloud.lattice_size, lambda, kMu, formulation, integration);
   }
   int n() const { return static_cast<int>(cloud.positions.cols()); }
 };
@@ -74,7 +84,8 @@ Eigen::MatrixXd assembled_stiffness(const SmallMesh& s) {
 }
 
 TEST(HexFem, PatchTestReproducesALinearFieldInside) {
-  const SmallMesh s(HexFormulation::linear);
+  for (const HexVolumetricIntegration integration : kIntegrations) {
+  const SmallMesh s(HexFormulation::linear, integration);
   const Eigen::MatrixXd K = assembled_stiffness(s);
   Mat3 G;
   G << 0.01, 0.02, -0.01, 0.005, -0.02, 0.015, 0.01, 0.0, 0.03;
@@ -98,6 +109,51 @@ TEST(HexFem, PatchTestReproducesALinearFieldInside) {
   for (int c = 0; c < nb; ++c) ub.segment<3>(3 * c) = G * s.cloud.positions.col(boundary[c]) + t;
   const Eigen::VectorXd ui = Kii.ldlt().solve(-Kib * ub);
   EXPECT_LT((ui - exact).cwiseAbs().maxCoeff(), 1e-12);
+  }
+}
+
+// Volumetric locking (Hughes 1980, constraint counting): with the bottom fixed, the
+// 27 bricks of SmallMesh have 48 free nodal dofs. Full integration imposes 8
+// incompressibility constraints per brick (216 > 48), so as nu -> 1/2 the mesh locks:
+// its compliance under a load that an incompressible continuum accommodates by an
+// isochoric flow (a point load on the free top) goes to zero. The reduced integration
+// imposes one per brick (27 < 48) and keeps a finite compliance.
+double top_load_compliance(HexVolumetricIntegration integration, double nu) {
+  const double E = 2 * kMu * (1 + nu);
+  const double lambda = E * nu / ((1 + nu) * (1 - 2 * nu));
+  const SmallMesh s(HexFormulation::linear, integration, lambda);
+  const Eigen::MatrixXd K = assembled_stiffness(s);
+  std::vector<int> free_dof;
+  for (int i = 0; i < s.n(); ++i)
+    if (s.cloud.positions(2, i) > 1e-12)
+      for (int c = 0; c < 3; ++c) free_dof.push_back(3 * i + c);
+  const int nf = static_cast<int>(free_dof.size());
+  Eigen::MatrixXd Kff(nf, nf);
+  for (int r = 0; r < nf; ++r)
+    for (int c = 0; c < nf; ++c) Kff(r, c) = K(free_dof[r], free_dof[c]);
+  // A downward unit force on the top node nearest the centre of the top face.
+  Eigen::VectorXd load = Eigen::VectorXd::Zero(nf);
+  int loaded = -1;
+  double nearest = 1e9;
+  for (int i = 0; i < s.n(); ++i) {
+    const double dist = (s.cloud.positions.col(i) - Vec3(0.5, 0.3, 0.8)).norm();
+    if (dist < nearest) nearest = dist, loaded = i;
+  }
+  for (int r = 0; r < nf; ++r)
+    if (free_dof[r] == 3 * loaded + 2) load[r] = -1.0;
+  const Eigen::VectorXd u = Kff.ldlt().solve(load);
+  return load.dot(u);
+}
+
+TEST(HexFem, ReducedVolumetricIntegrationDoesNotLock) {
+  const double full_ratio = top_load_compliance(HexVolumetricIntegration::full, 0.49999) /
+                            top_load_compliance(HexVolumetricIntegration::full, 0.3);
+  const double reduced_ratio = top_load_compliance(HexVolumetricIntegration::reduced, 0.49999) /
+                               top_load_compliance(HexVolumetricIntegration::reduced, 0.3);
+  RecordProperty("full_ratio", std::to_string(full_ratio));
+  RecordProperty("reduced_ratio", std::to_string(reduced_ratio));
+  EXPECT_LT(full_ratio, 0.05) << "full integration should lock";
+  EXPECT_GT(reduced_ratio, 0.3) << "reduced integration locks";
 }
 
 TEST(HexFem, CorotationalForceVanishesUnderRigidRotation) {

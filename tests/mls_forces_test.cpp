@@ -273,6 +273,66 @@ TEST(Corotational, ForceDifferentialMatchesFiniteDifferences) {
       test::model_from_json(cloud_scene(kJittered, "", kCorotational + R"(, "volume_stiffness": 700)")), 0.08);
 }
 
+// The small-strain linear law (material.law "linear"): the continuum of the linear hex
+// FEM and of the finite-cube reference, for verification against them. Independent
+// truths: Hooke's law of the symmetric gradient (uniaxial and shear strain, an
+// infinitesimal rotation is stress-free), agreement with St Venant-Kirchhoff to first
+// order in the strain, forces the negative energy gradient, the tangent by finite
+// differences, translation invariance. It is not objective (a finite rotation strains it).
+const std::string kLinear = R"(, "law": "linear")";
+
+TEST(LinearLaw, HookesLawOfTheSymmetricGradient) {
+  const Model m = test::model_from_json(cloud_scene(kGrid, "", kLinear));
+  const double lambda = m.lame_lambda, mu = m.lame_mu;
+  for (double e : {-0.3, -0.01, 0.02}) {
+    Mat3 F = Mat3::Identity();
+    F(0, 0) = 1 + e;
+    Mat3 P;
+    const double psi = first_piola_stress(m, F, P);
+    EXPECT_NEAR(P(0, 0), (lambda + 2 * mu) * e, 1e-9);
+    EXPECT_NEAR(P(1, 1), lambda * e, 1e-9);
+    EXPECT_NEAR(P(2, 2), lambda * e, 1e-9);
+    EXPECT_NEAR(psi, 0.5 * (lambda + 2 * mu) * e * e, 1e-9);
+  }
+  const double gamma = 0.04;  // simple shear: sigma_xy = mu gamma, psi = 1/2 mu gamma^2
+  Mat3 F = Mat3::Identity();
+  F(0, 1) = gamma;
+  Mat3 P;
+  EXPECT_NEAR(first_piola_stress(m, F, P), 0.5 * mu * gamma * gamma, 1e-9);
+  EXPECT_NEAR(P(0, 1), mu * gamma, 1e-9);
+  EXPECT_NEAR(P(1, 0), mu * gamma, 1e-9);
+  Mat3 W;  // an infinitesimal rotation (skew gradient) is stress-free
+  W << 0, -0.01, 0.02, 0.01, 0, -0.03, -0.02, 0.03, 0;
+  EXPECT_NEAR(first_piola_stress(m, Mat3::Identity() + W, P), 0.0, 1e-15);
+  EXPECT_LT(P.norm(), 1e-12);
+}
+
+TEST(LinearLaw, AgreesWithStVenantKirchhoffToFirstOrder) {
+  const Model lin = test::model_from_json(cloud_scene(kGrid, "", kLinear));
+  const Model stvk = test::model_from_json(cloud_scene(kGrid));
+  Mat3 G;
+  G << 0.3, -0.2, 0.5, 0.1, 0.4, -0.3, 0.2, 0.6, -0.1;
+  for (double scale : {1e-2, 1e-3}) {  // |P_lin - P_stvk| = O(scale^2)
+    Mat3 P_lin, P_stvk;
+    first_piola_stress(lin, Mat3::Identity() + scale * G, P_lin);
+    first_piola_stress(stvk, Mat3::Identity() + scale * G, P_stvk);
+    EXPECT_LT((P_lin - P_stvk).norm(), 5.0 * scale * scale * lin.lame_lambda) << "scale " << scale;
+    EXPECT_GT(P_lin.norm(), 0.5 * scale * lin.lame_mu);
+  }
+}
+
+TEST(LinearLaw, ForcesAreTheEnergyGradientAndTheTangentIsExact) {
+  const Model m = test::model_from_json(cloud_scene(kJittered, "", kLinear));
+  expect_forces_are_energy_gradient(m, 0.05);
+  expect_tangent_matches_finite_differences(m, 0.05);
+  expect_tangent_matches_finite_differences(
+      test::model_from_json(cloud_scene(kJittered, "", kLinear + R"(, "volume_stiffness": 700)")), 0.05);
+  const Points x = m.rest_position + random_displacement(m, 0.05, 11);
+  Points f(3, m.particle_count);
+  internal_forces(m, x, f);
+  EXPECT_LT(f.rowwise().sum().norm(), 1e-11 * f.cwiseAbs().maxCoeff() * m.particle_count);
+}
+
 TEST(MlsSolid, VolumesFollowTheKernelSumsAndTheLattice) {
   const Model lattice = test::model_from_json(cloud_scene(kGrid, R"(, "volumes": "lattice")"));
   EXPECT_NEAR(lattice.total_volume, 1.0, 1e-12);

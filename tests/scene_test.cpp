@@ -630,6 +630,10 @@ TEST(SceneHexFem, ModelAndFormulationParse) {
   const Scene s = parse_scene(R"({"model": "hex_fem", "hex_fem": {"formulation": "corotational"}})", "t.json", ".");
   EXPECT_EQ(s.model, "hex_fem");
   EXPECT_EQ(s.hex_fem.formulation, HexFormulation::corotational);
+  EXPECT_EQ(s.hex_fem.volumetric_integration, HexVolumetricIntegration::full);
+  EXPECT_EQ(parse_scene(R"({"model": "hex_fem", "hex_fem": {"volumetric_integration": "reduced"}})", "t.json", ".")
+                .hex_fem.volumetric_integration,
+            HexVolumetricIntegration::reduced);
   const Scene shipped = load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/hertz_cube_fem.json");
   EXPECT_EQ(shipped.model, "hex_fem");
   EXPECT_EQ(shipped.integrator.type, IntegratorType::implicit_euler);
@@ -649,6 +653,13 @@ TEST(SceneHexFem, RejectsNonLatticeCloudsAndUnknownFormulations) {
     EXPECT_EQ(e.field(), "/hex_fem/formulation");
     EXPECT_NE(e.reason().find("linear, corotational"), std::string::npos) << e.reason();
   }
+  try {
+    parse_scene(R"({"hex_fem": {"volumetric_integration": "selective"}})", "t.json", ".");
+    FAIL();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/hex_fem/volumetric_integration");
+    EXPECT_NE(e.reason().find("full, reduced"), std::string::npos) << e.reason();
+  }
 }
 
 }  // namespace
@@ -661,12 +672,13 @@ TEST(SceneMaterialLaw, CorotationalIsAnMlsLawAndUnknownLawsAreNamed) {
   const Scene s = test::scene_from_json(R"({"material": {"law": "corotational"}})");
   EXPECT_EQ(s.material.law, MaterialLaw::corotational);
   EXPECT_EQ(test::scene_from_json("{}").material.law, MaterialLaw::stvk);
+  EXPECT_EQ(test::scene_from_json(R"({"material": {"law": "linear"}})").material.law, MaterialLaw::linear);
   try {
     test::scene_from_json(R"({"material": {"law": "neo_hookean"}})");
     FAIL() << "an unknown law was accepted";
   } catch (const SceneError& e) {
     EXPECT_EQ(e.field(), "/material/law");
-    EXPECT_EQ(e.reason(), "unknown material law 'neo_hookean' (known: stvk, corotational)");
+    EXPECT_EQ(e.reason(), "unknown material law 'neo_hookean' (known: stvk, corotational, linear)");
   }
   try {
     test::scene_from_json(R"({"model": "hex_fem", "material": {"law": "corotational"}})");

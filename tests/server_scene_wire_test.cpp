@@ -68,6 +68,19 @@ TEST(SceneWire, SceneFileRoundTripsThroughTheWire) {
   EXPECT_EQ(wire.fixed_faces, file.fixed_faces);
 }
 
+// The material law and the hex FEM's volumetric integration cross the wire.
+TEST(SceneWire, MaterialLawAndVolumetricIntegrationRoundTrip) {
+  capnp::MallocMessageBuilder mb;
+  auto scene = mb.initRoot<wire::Scene>();
+  scene_json_to_wire(R"({"material": {"law": "corotational"}, "hex_fem": {"volumetric_integration": "reduced"}})",
+                     "t.json", scene);
+  EXPECT_EQ(scene.getMaterial().getLaw(), wire::MaterialLaw::COROTATIONAL);
+  EXPECT_EQ(scene.getHexFem().getVolumetricIntegration(), wire::HexVolumetricIntegration::REDUCED);
+  const Scene s = scene_from_wire(scene, "<rpc scene>", ".");
+  EXPECT_EQ(s.material.law, MaterialLaw::corotational);
+  EXPECT_EQ(s.hex_fem.volumetric_integration, HexVolumetricIntegration::reduced);
+}
+
 // The mesh distribution (Distribution.file, VolumeRule mesh): JSON -> wire -> JSON
 // keeps the file name and the volume rule.
 TEST(SceneWire, MeshDistributionRoundTrips) {
