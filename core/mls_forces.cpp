@@ -363,6 +363,29 @@ PALPATE_INLINE void scatter_forces(const Block& block, const Slot* slot, const S
   subtract_lanes(f, i, g, lanes);
 }
 
+// cof F of the four lanes: its columns are the columns of F crossed pairwise.
+PALPATE_INLINE void cofactor_lanes(const Mat3Lanes& F, Mat3Lanes& C) {
+  PALPATE_UNROLL
+  for (int c = 0; c < 3; ++c) {
+    const int a = (c + 1) % 3, b = (c + 2) % 3;
+    PALPATE_UNROLL
+    for (int r = 0; r < 3; ++r) {
+      const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
+      C(r, c) = F(r1, a) * F(r2, b) - F(r2, a) * F(r1, b);
+    }
+  }
+}
+
+// vP += v k_v (J - 1) cof F, the volume term's stress.
+PALPATE_INLINE void add_weighted_volume_term(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+  Mat3Lanes C;
+  cofactor_lanes(F, C);
+  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  const Lanes scale = (m.volume_stiffness * v) * (J - 1.0);
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) vP.m[k] += scale * C.m[k];
+}
+
 // v_i P_i for the four particles of a block, from F_i: Green strain E = 1/2 (F^T F - I)
 // St Venant-Kirchhoff S = lambda tr(E) I + 2 mu E, P = F S, plus the volume
 // term k_v (J - 1) cof F when volume_term. The volume v_i is folded into S.
@@ -384,22 +407,7 @@ PALPATE_INLINE void weighted_piola_stress(const Model& m, const Mat3Lanes& F, co
   for (int r = 0; r < 3; ++r)
     PALPATE_UNROLL
     for (int c = 0; c < 3; ++c) vP(r, c) = F(r, 0) * vS(0, c) + F(r, 1) * vS(1, c) + F(r, 2) * vS(2, c);
-  if constexpr (volume_term) {  // P += k_v (J - 1) cof F, cof F columns = F columns crossed pairwise
-    Mat3Lanes C;
-    PALPATE_UNROLL
-    for (int c = 0; c < 3; ++c) {
-      const int a = (c + 1) % 3, b = (c + 2) % 3;
-      PALPATE_UNROLL
-      for (int r = 0; r < 3; ++r) {
-        const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
-        C(r, c) = F(r1, a) * F(r2, b) - F(r2, a) * F(r1, b);
-      }
-    }
-    const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
-    const Lanes scale = (m.volume_stiffness * v) * (J - 1.0);
-    PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) vP.m[k] += scale * C.m[k];
-  }
+  if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
 }
 
 // v_i dP_i, the differential of weighted_piola_stress at (F_i, S_i) along dF_i:
@@ -451,6 +459,50 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
 
+// The rotation R of the polar decomposition of the four lanes' F: polar_rotation's
+// Newton iteration R <- 1/2 (g R + cof R / (g det R)) on all lanes together, with the
+// Frobenius-norm scaling g = (|R^-1| / |R|)^(1/2) (no cube root) while a lane is far from
+// convergence. Converged lanes stay put (an orthogonal R is a fixed point). Returns false,
+// leaving the lanes to polar_rotation, if a lane is (nearly) singular or does not converge.
+PALPATE_INLINE bool polar_rotation_lanes(const Mat3Lanes& F, Mat3Lanes& R) {
+  R = F;
+  Lanes scaled = {1, 1, 1, 1};  // 1 while the lane's last change exceeded 1e-4
+  for (int it = 0; it < 30; ++it) {
+    Mat3Lanes C;
+    cofactor_lanes(R, C);
+    const Lanes det = R(0, 0) * C(0, 0) + R(1, 0) * C(1, 0) + R(2, 0) * C(2, 0);
+    Lanes norm_R = R.m[0] * R.m[0], norm_C = C.m[0] * C.m[0];
+    PALPATE_UNROLL
+    for (int k = 1; k < 9; ++k) {
+      norm_R += R.m[k] * R.m[k];
+      norm_C += C.m[k] * C.m[k];
+    }
+    Lanes g;
+    PALPATE_UNROLL
+    for (int l = 0; l < kLanes; ++l) {
+      if (!(std::abs(det[l]) > 1e-300)) return false;
+      g[l] = scaled[l] != 0 ? std::sqrt(std::sqrt(norm_C[l] / (det[l] * det[l] * norm_R[l]))) : 1.0;
+    }
+    const Lanes a = 0.5 * g, b = 0.5 / (g * det);
+    Lanes change = {0, 0, 0, 0};
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) {
+      const Lanes next = a * R.m[k] + b * C.m[k];
+      const Lanes d = next - R.m[k];
+      change += d * d;
+      R.m[k] = next;
+    }
+    bool converged = true;
+    PALPATE_UNROLL
+    for (int l = 0; l < kLanes; ++l) {
+      converged = converged && change[l] < 1e-24;
+      if (!(change[l] > 1e-4)) scaled[l] = 0;
+    }
+    if (converged) return true;
+  }
+  return false;
+}
+
 // v_i P_i of the laws other than St Venant-Kirchhoff, one lane at a time (the polar
 // decomposition iterates a data-dependent number of times); the gather and scatter stay blocked.
 PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
@@ -460,6 +512,22 @@ PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F,
     piola_stress(m, Fl, P);
     for (int k = 0; k < 9; ++k) vP.m[k][l] = v[l] * P(k % 3, k / 3);
   }
+}
+
+// v_i P_i of the corotational law, P = 2 mu (F - R) + lambda (tr(R^T F) - 3) R, on all
+// four lanes together (the volume term added when volume_term).
+template <bool volume_term>
+PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+  Mat3Lanes R;
+  if (!polar_rotation_lanes(F, R)) return weighted_stress_per_lane(m, F, v, vP);
+  Lanes trace_strain = R.m[0] * F.m[0];
+  PALPATE_UNROLL
+  for (int k = 1; k < 9; ++k) trace_strain += R.m[k] * F.m[k];
+  trace_strain -= 3.0;
+  const Lanes v_2mu = (2 * m.lame_mu) * v, v_lambda_tr = (m.lame_lambda * v) * trace_strain;
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) vP.m[k] = v_2mu * (F.m[k] - R.m[k]) + v_lambda_tr * R.m[k];
+  if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
 }
 
 // v_i dP_i of the laws other than St Venant-Kirchhoff at (F_i, S_i) along dF_i, one lane at a time.
@@ -491,7 +559,9 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
     for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
     add_gradient(begin, end, x, i, F);
     Mat3Lanes vP;
-    if (m.law != MaterialLaw::stvk)
+    if (m.law == MaterialLaw::corotational)
+      weighted_corotational_stress<volume_term>(m, F, load(block.volume), vP);
+    else if (m.law != MaterialLaw::stvk)
       weighted_stress_per_lane(m, F, load(block.volume), vP);
     else
       weighted_piola_stress<volume_term>(m, F, load(block.volume), vP);
