@@ -438,13 +438,13 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
                  F(r, 1) * dS(1, c) + F(r, 2) * dS(2, c);
   if constexpr (volume_term) {
     Mat3Lanes C, dC;  // cof F and its differential (columns of F, dF crossed pairwise)
+    cofactor_lanes(F, C);
     PALPATE_UNROLL
     for (int c = 0; c < 3; ++c) {
       const int a = (c + 1) % 3, b = (c + 2) % 3;
       PALPATE_UNROLL
       for (int r = 0; r < 3; ++r) {
         const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
-        C(r, c) = F(r1, a) * F(r2, b) - F(r2, a) * F(r1, b);
         dC(r, c) = dF(r1, a) * F(r2, b) - dF(r2, a) * F(r1, b) + F(r1, a) * dF(r2, b) - F(r2, a) * dF(r1, b);
       }
     }

@@ -229,18 +229,29 @@ TEST(MlsSolid, ForceDifferentialMatchesFiniteDifferences) {
 // forces are the negative energy gradient; the tangent matches finite differences.
 const std::string kCorotational = R"(, "law": "corotational")";
 
+// A uniaxial stretch F = diag(1 + e, 1, 1) gives the small-strain stress and energy of
+// the strain e, exactly: P11 = (lambda + 2 mu) e, P22 = P33 = lambda e, psi = 1/2 (lambda + 2 mu) e^2.
+void expect_uniaxial_stretch_gives_the_linear_law(const Model& m, double e) {
+  const double lambda = m.lame_lambda, mu = m.lame_mu;
+  Mat3 F = Mat3::Identity();
+  F(0, 0) = 1 + e;
+  Mat3 P;
+  const double psi = first_piola_stress(m, F, P);
+  EXPECT_NEAR(P(0, 0), (lambda + 2 * mu) * e, 1e-9);
+  EXPECT_NEAR(P(1, 1), lambda * e, 1e-9);
+  EXPECT_NEAR(P(2, 2), lambda * e, 1e-9);
+  EXPECT_NEAR(P(0, 1), 0.0, 1e-12);
+  EXPECT_NEAR(psi, 0.5 * (lambda + 2 * mu) * e * e, 1e-9);
+}
+
 TEST(Corotational, StretchGivesTheLinearLawAndRotationsRotateIt) {
   const Model m = test::model_from_json(cloud_scene(kGrid, "", kCorotational));
-  const double lambda = m.lame_lambda, mu = m.lame_mu;
   for (double e : {-0.3, -0.01, 0.01, 0.3}) {
+    expect_uniaxial_stretch_gives_the_linear_law(m, e);
     Mat3 F = Mat3::Identity();
     F(0, 0) = 1 + e;
     Mat3 P;
     const double psi = first_piola_stress(m, F, P);
-    EXPECT_NEAR(P(0, 0), (lambda + 2 * mu) * e, 1e-9);
-    EXPECT_NEAR(P(1, 1), lambda * e, 1e-9);
-    EXPECT_NEAR(P(0, 1), 0.0, 1e-12);
-    EXPECT_NEAR(psi, 0.5 * (lambda + 2 * mu) * e * e, 1e-9);
     const Mat3 Q = Eigen::AngleAxisd(1.1, Vec3(0.3, -1, 0.5).normalized()).toRotationMatrix();
     Mat3 P_rot;
     EXPECT_NEAR(first_piola_stress(m, Q * F, P_rot), psi, 1e-9);  // rotated body: P -> Q P
@@ -308,17 +319,8 @@ const std::string kLinear = R"(, "law": "linear")";
 
 TEST(LinearLaw, HookesLawOfTheSymmetricGradient) {
   const Model m = test::model_from_json(cloud_scene(kGrid, "", kLinear));
-  const double lambda = m.lame_lambda, mu = m.lame_mu;
-  for (double e : {-0.3, -0.01, 0.02}) {
-    Mat3 F = Mat3::Identity();
-    F(0, 0) = 1 + e;
-    Mat3 P;
-    const double psi = first_piola_stress(m, F, P);
-    EXPECT_NEAR(P(0, 0), (lambda + 2 * mu) * e, 1e-9);
-    EXPECT_NEAR(P(1, 1), lambda * e, 1e-9);
-    EXPECT_NEAR(P(2, 2), lambda * e, 1e-9);
-    EXPECT_NEAR(psi, 0.5 * (lambda + 2 * mu) * e * e, 1e-9);
-  }
+  const double mu = m.lame_mu;
+  for (double e : {-0.3, -0.01, 0.02}) expect_uniaxial_stretch_gives_the_linear_law(m, e);
   const double gamma = 0.04;  // simple shear: sigma_xy = mu gamma, psi = 1/2 mu gamma^2
   Mat3 F = Mat3::Identity();
   F(0, 1) = gamma;
