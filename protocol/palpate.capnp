@@ -131,6 +131,14 @@ struct Integrator {
   damping @2 :Float64 = 0;                                        # 1/s, [0, 1e6]
   cgTolerance @3 :Float64 = 1e-8 $Json.name("cg_tolerance");      # (0, 1)
   cgMaxIterations @4 :Int32 = 1000 $Json.name("cg_max_iterations"); # [1, 1e6]
+  allowUnstableDt @5 :Bool = false $Json.name("allow_unstable_dt");  # skip the stable-envelope check
+}
+struct Health {                  # per-step health checks (core/health.h, docs/scene-format.md)
+  enabled @0 :Bool = true;
+  energyFactor @1 :Float64 = 10 $Json.name("energy_factor");                # [1, inf)
+  maxIndenterSpeed @2 :Float64 = 0 $Json.name("max_indenter_speed");        # m/s, 0 = one spacing per step
+  maxPenetration @3 :Float64 = 0 $Json.name("max_penetration");             # m, 0 = tolerance + 5 % spacing
+  inversionSweepTicks @4 :Int32 = 64 $Json.name("inversion_sweep_ticks");   # [1, 1e6]
 }
 struct Rest {
   velocityTolerance @0 :Float64 = 1e-4 $Json.name("velocity_tolerance"); # m/s, > 0
@@ -155,6 +163,7 @@ struct Scene {
   integrator @9 :Integrator;
   gravity @10 :List(Float64);        # [x, y, z] m/s^2; null = [0, 0, 0]; norm <= 1000
   verify @11 :Verify;
+  health @12 :Health;
 }
 
 # ---------------------------------------------------------------------------

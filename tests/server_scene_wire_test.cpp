@@ -81,6 +81,31 @@ TEST(SceneWire, MaterialLawAndVolumetricIntegrationRoundTrip) {
   EXPECT_EQ(s.hex_fem.volumetric_integration, HexVolumetricIntegration::reduced);
 }
 
+// The health checks and the envelope override cross the wire too, with the file's validation.
+TEST(SceneWire, HealthAndAllowUnstableDtRoundTrip) {
+  capnp::MallocMessageBuilder mb;
+  auto scene = mb.initRoot<wire::Scene>();
+  scene_json_to_wire(R"({"health": {"enabled": false, "energy_factor": 4, "inversion_sweep_ticks": 8},
+                         "integrator": {"allow_unstable_dt": true}})",
+                     "t.json", scene);
+  EXPECT_FALSE(scene.getHealth().getEnabled());
+  EXPECT_TRUE(scene.getIntegrator().getAllowUnstableDt());
+  const Scene s = scene_from_wire(scene, "<rpc scene>", ".");
+  EXPECT_FALSE(s.health.enabled);
+  EXPECT_EQ(s.health.energy_factor, 4.0);
+  EXPECT_EQ(s.health.inversion_sweep_ticks, 8);
+  EXPECT_TRUE(s.integrator.allow_unstable_dt);
+  capnp::MallocMessageBuilder bad;
+  auto b = bad.initRoot<wire::Scene>();
+  b.initHealth().setEnergyFactor(0.5);
+  try {
+    scene_from_wire(b, "<rpc scene>", ".");
+    FAIL() << "an energy factor below 1 was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/health/energy_factor");
+  }
+}
+
 // The mesh distribution (Distribution.file, VolumeRule mesh): JSON -> wire -> JSON
 // keeps the file name and the volume rule.
 TEST(SceneWire, MeshDistributionRoundTrips) {
