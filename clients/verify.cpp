@@ -148,6 +148,9 @@ int main(int argc, char** argv) {
                  model.total_volume, model.box_volume, model.integration_residual,
                  model.integration_residual_nodal, to_string(scene.integrator.type), scene.integrator.dt,
                  scene.integrator.damping);
+  if (!quiet && model.mesh_tetrahedra > 0)
+    std::fprintf(stderr, "palpate-verify: mesh of %lld tetrahedra (%lld unused nodes dropped)\n",
+                 static_cast<long long>(model.mesh_tetrahedra), static_cast<long long>(model.mesh_unused_nodes));
 
   // The finite-block reference (core/reference.h).
   std::optional<Reference> reference;
@@ -268,6 +271,8 @@ int main(int argc, char** argv) {
     out["indenter_radius"] = scene.indenter.radius;
     out["total_volume"] = model.total_volume;
     out["box_volume"] = model.box_volume;
+    out["mesh_tetrahedra"] = model.mesh_tetrahedra;
+    out["mesh_unused_nodes"] = model.mesh_unused_nodes;
     out["integrator"] = to_string(scene.integrator.type);
     out["dt"] = scene.integrator.dt;
     out["neighbors"] = scene.mls.neighbors;
