@@ -363,17 +363,24 @@ PALPATE_INLINE void scatter_forces(const Block& block, const Slot* slot, const S
   subtract_lanes(f, i, g, lanes);
 }
 
-// cof F of the four lanes: its columns are the columns of F crossed pairwise.
-PALPATE_INLINE void cofactor_lanes(const Mat3Lanes& F, Mat3Lanes& C) {
+// C += the columns of A and B crossed pairwise: column c of C gains A_a x B_b, (a, b) =
+// (c + 1, c + 2) mod 3. With A = B = F that is cof F; d cof F = cross(dF, F) + cross(F, dF).
+PALPATE_INLINE void add_crossed_columns(const Mat3Lanes& A, const Mat3Lanes& B, Mat3Lanes& C) {
   PALPATE_UNROLL
   for (int c = 0; c < 3; ++c) {
     const int a = (c + 1) % 3, b = (c + 2) % 3;
     PALPATE_UNROLL
     for (int r = 0; r < 3; ++r) {
       const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
-      C(r, c) = F(r1, a) * F(r2, b) - F(r2, a) * F(r1, b);
+      C(r, c) += A(r1, a) * B(r2, b) - A(r2, a) * B(r1, b);
     }
   }
+}
+
+// cof F of the four lanes.
+PALPATE_INLINE void cofactor_lanes(const Mat3Lanes& F, Mat3Lanes& C) {
+  C = {};
+  add_crossed_columns(F, F, C);
 }
 
 // vP += v k_v (J - 1) cof F, the volume term's stress.
@@ -437,17 +444,10 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
       dP(r, c) = dF(r, 0) * S(0, c) + dF(r, 1) * S(1, c) + dF(r, 2) * S(2, c) + F(r, 0) * dS(0, c) +
                  F(r, 1) * dS(1, c) + F(r, 2) * dS(2, c);
   if constexpr (volume_term) {
-    Mat3Lanes C, dC;  // cof F and its differential (columns of F, dF crossed pairwise)
+    Mat3Lanes C, dC = {};  // cof F and its differential
     cofactor_lanes(F, C);
-    PALPATE_UNROLL
-    for (int c = 0; c < 3; ++c) {
-      const int a = (c + 1) % 3, b = (c + 2) % 3;
-      PALPATE_UNROLL
-      for (int r = 0; r < 3; ++r) {
-        const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
-        dC(r, c) = dF(r1, a) * F(r2, b) - dF(r2, a) * F(r1, b) + F(r1, a) * dF(r2, b) - F(r2, a) * dF(r1, b);
-      }
-    }
+    add_crossed_columns(dF, F, dC);
+    add_crossed_columns(F, dF, dC);
     const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
     Lanes C_dF = C.m[0] * dF.m[0];
     PALPATE_UNROLL
