@@ -15,7 +15,7 @@ BUILD_DIR=${BUILD_DIR:-build}
 REPEATS=100
 if [[ "${1:-}" == "--repeats" ]]; then REPEATS=$2; shift 2; fi
 SCENES=("$@")
-[[ ${#SCENES[@]} -gt 0 ]] || SCENES=(scenes/hertz_cube.json scenes/hertz_cube_graded.json scenes/hertz_cube_tet.json
+[[ ${#SCENES[@]} -gt 0 ]] || SCENES=(scenes/hertz_cube.json scenes/hertz_cube_haptic.json scenes/hertz_cube_graded.json scenes/hertz_cube_tet.json
                                       scenes/hertz_cube_fem.json scenes/hertz_cube_graded_fem.json)
 OUT="$BUILD_DIR/bench_scenes.jsonl"
 : > "$OUT"

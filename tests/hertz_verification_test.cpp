@@ -14,12 +14,15 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/model.h"
+#include "core/reference.h"
 #include "core/scene.h"
 #include "core/state.h"
 
@@ -101,6 +104,46 @@ TEST(HertzVerification, GradedCloudBeatsTheUniformOneAtEqualParticleCount) {
   const double graded = l2_error("hertz_cube_graded.json", {{"body.distribution.per_edge", "11"},
                                                             {"body.distribution.first_spacing", "0.04"}});
   EXPECT_LT(graded, 0.7 * uniform) << "graded " << graded << ", uniform " << uniform;
+}
+
+}  // namespace
+}  // namespace palpate
+
+namespace palpate {
+namespace {
+
+// Every shipped scene loads, validates and builds (its dt inside the stable envelope,
+// its mesh file found, its support well posed).
+TEST(ShippedScenes, EveryOneBuilds) {
+  int scenes = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(std::string(PALPATE_SOURCE_DIR) + "/scenes")) {
+    if (entry.path().extension() != ".json") continue;
+    SCOPED_TRACE(entry.path().filename().string());
+    const Model model = build_model(load_scene(entry.path()));
+    EXPECT_GT(model.particle_count, 0);
+    ++scenes;
+  }
+  EXPECT_GE(scenes, 6);
+}
+
+// The haptic scene (a 1691-node graded tetrahedralisation, symplectic Euler at 1 ms,
+// fast enough for 1 kHz) against the converged finite-cube reference stored with the
+// scenes (an extrapolated hex FEM, core/reference.h): within 2 % at the ends and the
+// middle of the sweep.
+TEST(HertzVerification, HapticSceneIsWithinTwoPercentOfTheFiniteCubeReference) {
+  const std::filesystem::path dir = std::string(PALPATE_SOURCE_DIR) + "/scenes";
+  const Scene scene = load_scene(dir / "hertz_cube_haptic.json");
+  const std::optional<Reference> reference = find_reference(scene, dir / "references");
+  ASSERT_TRUE(reference.has_value()) << "no stored reference for " << reference_key(scene);
+  const Model model = build_model(scene);
+  EXPECT_LE(model.particle_count, 2000);
+  State state = make_state(model);
+  for (double force : {10.36, 82.88, 327.6}) {
+    const PressResult r = press_to_rest(model, state, force);
+    ASSERT_TRUE(r.at_rest) << "F = " << force;
+    const double d_ref = reference_indentation(*reference, force);
+    EXPECT_NEAR(r.indentation / d_ref - 1.0, 0.0, 0.02) << "F = " << force << ", d = " << r.indentation;
+  }
 }
 
 }  // namespace
