@@ -9,20 +9,25 @@
 #   scripts/demo.sh                 # the server demo (~10 s after the build)
 #   scripts/demo.sh --headless      # the same client on a headless session (force steps to rest)
 #   scripts/demo.sh --verify [ARGS] # the Hertz verification sweep (palpate-verify, ~40 s)
+#   SCENE=hertz_cube_haptic scripts/demo.sh   # any scene of scenes/ by name, e.g. the
+#                                   # 1 kHz-accurate tetrahedral cloud
 #
-# Environment: BUILD_DIR (default build), PORT (default 7420), SECONDS_RUN (default 5), RAMP (default 100 N).
+# Environment: BUILD_DIR (default build), SCENE (default hertz_cube), PORT (default 7420),
+# SECONDS_RUN (default 5), RAMP (default 100 N).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
 BUILD_DIR=${BUILD_DIR:-build}
+SCENE=${SCENE:-hertz_cube}
+[[ -f scenes/$SCENE.json ]] || { echo "demo.sh: no scene scenes/$SCENE.json (SCENE is a name under scenes/)" >&2; exit 2; }
 echo "== building (Release) in $BUILD_DIR"
 cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$BUILD_DIR" -j"$(nproc)" >/dev/null
 
 if [[ "${1:-}" == "--verify" ]]; then
   shift
-  echo "== palpate-verify on scenes/hertz_cube.json"
-  exec "$BUILD_DIR/bin/palpate-verify" --scene scenes/hertz_cube.json "$@"
+  echo "== palpate-verify on scenes/$SCENE.json"
+  exec "$BUILD_DIR/bin/palpate-verify" --scene "scenes/$SCENE.json" "$@"
 fi
 
 PORT=${PORT:-7420}
@@ -30,7 +35,7 @@ SECONDS_RUN=${SECONDS_RUN:-5}
 RAMP=${RAMP:-100}
 LOG=$(mktemp -t palpate-server.XXXXXX.log)
 echo "== palpate-server on 127.0.0.1:$PORT (log: $LOG)"
-"$BUILD_DIR/bin/palpate-server" --listen "127.0.0.1:$PORT" --scene scenes/hertz_cube.json --rate 1000 >"$LOG" 2>&1 &
+"$BUILD_DIR/bin/palpate-server" --listen "127.0.0.1:$PORT" --scene "scenes/$SCENE.json" --rate 1000 >"$LOG" 2>&1 &
 SERVER_PID=$!
 trap 'kill -TERM $SERVER_PID 2>/dev/null || true; wait $SERVER_PID 2>/dev/null || true' EXIT
 for _ in $(seq 100); do  # wait for "listening on" (at most 10 s)
@@ -42,10 +47,10 @@ grep -q "listening on" "$LOG" || { echo "server did not start"; cat "$LOG"; exit
 
 if [[ "${1:-}" == "--headless" ]]; then
   echo "== palpate-client --headless: forces applied one after the other, each stepped to rest"
-  "$BUILD_DIR/bin/palpate-client" --connect "127.0.0.1:$PORT" --scene hertz_cube --headless --forces 10.36,29.30,53.83,82.88
+  "$BUILD_DIR/bin/palpate-client" --connect "127.0.0.1:$PORT" --scene "$SCENE" --headless --forces 10.36,29.30,53.83,82.88
 else
   echo "== palpate-client: force ramp 0 -> $RAMP N over $SECONDS_RUN s, streamed at 20 Hz"
-  "$BUILD_DIR/bin/palpate-client" --connect "127.0.0.1:$PORT" --scene hertz_cube --ramp "$RAMP" \
+  "$BUILD_DIR/bin/palpate-client" --connect "127.0.0.1:$PORT" --scene "$SCENE" --ramp "$RAMP" \
     --seconds "$SECONDS_RUN" --rate 20
 fi
 echo "== (a dynamic ramp lags the quasi-static Hertz depth; scripts/demo.sh --headless compares at rest)"
