@@ -150,7 +150,8 @@ inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volum
 }
 
 // First Piola stress P of particle i (elastic + volume term) and its energy density.
-// S_out receives what the tangent needs: S (St Venant-Kirchhoff) or R (corotational).
+// S_out receives what the tangent needs: S (St Venant-Kirchhoff) or R (corotational);
+// the linear law needs nothing (I).
 inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out = nullptr) {
   Mat3 S = Mat3::Identity();
   double psi = 0;

@@ -30,7 +30,8 @@ void linearize_forces(const Model& model, const Points& x, std::vector<double>& 
 void force_differential(const Model& model, const std::vector<double>& cached_F,
                         const std::vector<double>& cached_S, const Points& dx, Points& df);
 
-// Floating-point operations of one internal_forces call (for the benchmark's GFLOP/s).
+// Floating-point operations of one internal_forces call (for the benchmark's GFLOP/s),
+// as the St Venant-Kirchhoff law does them.
 double internal_forces_flops(const Model& model);
 
 }  // namespace palpate
