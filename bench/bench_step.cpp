@@ -93,12 +93,9 @@ int main(int argc, char** argv) {
   double ie_dt = 0.01, press_force = 150.0;
   bool json_out = false;
   try {
-    for (int a = 1; a < argc; ++a) {
-      const std::string arg = argv[a];
-      auto value = [&]() -> std::string {
-        if (a + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
-        return argv[++a];
-      };
+    for (cli::Arguments args(argc, argv); args.next();) {
+      const std::string& arg = args.flag();
+      auto value = [&] { return args.value(); };
       if (arg == "--scene") scene_file = value();
       else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
       else if (arg == "--set") overrides.push_back(cli::scene_override(value()));

@@ -38,12 +38,9 @@ int main(int argc, char** argv) {
   double tolerance = 0.01;
   bool json = false, quiet = false;
   try {
-    for (int a = 1; a < argc; ++a) {
-      const std::string arg = argv[a];
-      auto value = [&]() -> std::string {
-        if (a + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
-        return argv[++a];
-      };
+    for (cli::Arguments args(argc, argv); args.next();) {
+      const std::string& arg = args.flag();
+      auto value = [&] { return args.value(); };
       if (arg == "--scene") scene_file = value();
       else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
       else if (arg == "--force") force = std::stod(value());

@@ -792,12 +792,9 @@ json long_run_study(const Options& opt, json& meta, json& per_period) {
 int main(int argc, char** argv) {
   Options opt;
   try {
-    for (int a = 1; a < argc; ++a) {
-      const std::string arg = argv[a];
-      auto value = [&]() -> std::string {
-        if (a + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
-        return argv[++a];
-      };
+    for (cli::Arguments args(argc, argv); args.next();) {
+      const std::string& arg = args.flag();
+      auto value = [&] { return args.value(); };
       if (arg == "--quick") opt.mode = Mode::quick;
       else if (arg == "--smoke") opt.mode = Mode::smoke;
       else if (arg == "--only") {

@@ -9,6 +9,31 @@
 
 namespace palpate::cli {
 
+// Walks argv after the program name:
+//   for (cli::Arguments args(argc, argv); args.next();)
+//     if (args.flag() == "--scene") scene = args.value(); ...
+// value() takes the argument after the flag, or throws "FLAG needs a value".
+class Arguments {
+ public:
+  Arguments(int argc, char** argv) : argc_(argc), argv_(argv) {}
+  bool next() {
+    if (++index_ >= argc_) return false;
+    flag_ = argv_[index_];
+    return true;
+  }
+  const std::string& flag() const { return flag_; }
+  std::string value() {
+    if (index_ + 1 >= argc_) throw std::invalid_argument(flag_ + " needs a value");
+    return argv_[++index_];
+  }
+
+ private:
+  int argc_;
+  char** argv_;
+  int index_ = 0;
+  std::string flag_;
+};
+
 // "--set KEY=VALUE": the scene override (KEY a dotted field path, validated with the scene).
 inline std::pair<std::string, std::string> scene_override(const std::string& assignment) {
   const auto eq = assignment.find('=');

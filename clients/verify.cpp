@@ -87,12 +87,9 @@ int main(int argc, char** argv) {
   std::string reference_choice = "auto";
   double trace_interval = 0;
   try {
-    for (int a = 1; a < argc; ++a) {
-      const std::string arg = argv[a];
-      auto value = [&]() -> std::string {
-        if (a + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
-        return argv[++a];
-      };
+    for (cli::Arguments args(argc, argv); args.next();) {
+      const std::string& arg = args.flag();
+      auto value = [&] { return args.value(); };
       if (arg == "--scene") scene_file = value();
       else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
       else if (arg == "--forces") forces = cli::positive_list(value(), "--forces");

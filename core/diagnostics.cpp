@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "core/hex_fem.h"
 #include "core/mls_forces.h"
 #include "core/solid.h"
 
@@ -26,24 +27,13 @@ namespace {
 // det F at the eight Gauss points of a trilinear brick (edges hx, hy, hz along the
 // axes, local node order of hex_fem.h); returns the smallest.
 double brick_min_jacobian(const Points& x, const std::array<int, 8>& nodes, const Eigen::Vector3d& size) {
-  static constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
-                                        {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
   const double g = 1.0 / std::sqrt(3.0);
   double smallest = INFINITY;
-  for (int q = 0; q < 8; ++q) {
-    const double p[3] = {kCorner[q][0] ? g : -g, kCorner[q][1] ? g : -g, kCorner[q][2] ? g : -g};
+  for (int q = 0; q < 8; ++q) {  // Gauss points (+-g)^3
+    const double xi[3] = {(q & 1) ? g : -g, (q & 2) ? g : -g, (q & 4) ? g : -g};
+    const BrickGradients grad = brick_shape_gradients(size, xi);
     Mat3 F = Mat3::Zero();
-    for (int a = 0; a < 8; ++a) {
-      double s[3], f[3];
-      for (int c = 0; c < 3; ++c) {
-        s[c] = kCorner[a][c] ? 1.0 : -1.0;
-        f[c] = 1.0 + s[c] * p[c];
-      }
-      // dN_a/dX_c = s_c / 8 * (product of the other two factors) * 2 / h_c
-      const Vec3 grad(s[0] * f[1] * f[2] / (4 * size[0]), s[1] * f[0] * f[2] / (4 * size[1]),
-                      s[2] * f[0] * f[1] / (4 * size[2]));
-      F += x.col(nodes[a]) * grad.transpose();
-    }
+    for (int a = 0; a < 8; ++a) F += x.col(nodes[a]) * grad.col(a).transpose();
     smallest = std::min(smallest, F.determinant());
   }
   return smallest;

@@ -29,6 +29,18 @@ inline ElementVector element_displacement(const Points& rest, const Points& x, c
 
 }  // namespace
 
+BrickGradients brick_shape_gradients(const Eigen::Vector3d& size, const double xi[3]) {
+  BrickGradients G;
+  for (int a = 0; a < 8; ++a)
+    for (int c = 0; c < 3; ++c) {  // dN_a/dx_c = dN_a/dxi_c * 2 / h_c, N_a = 1/8 prod (1 + xi_o s_o)
+      double v = 0.125 * kCorner[a][c];
+      for (int o = 0; o < 3; ++o)
+        if (o != c) v *= 1.0 + xi[o] * kCorner[a][o];
+      G(c, a) = v * 2.0 / size[c];
+    }
+  return G;
+}
+
 ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu,
                                     HexVolumetricIntegration volumetric) {
   // Isotropic elasticity in Voigt form (engineering shear strains): the shear
@@ -41,15 +53,10 @@ ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, 
   const double detJ = size.prod() / 8.0;  // the map from [-1, 1]^3
   // B(xi): strain-displacement matrix at natural coordinates xi.
   auto strain_matrix = [&](const double xi[3]) {
+    const BrickGradients G = brick_shape_gradients(size, xi);
     Eigen::Matrix<double, 6, 24> B = Eigen::Matrix<double, 6, 24>::Zero();
     for (int a = 0; a < 8; ++a) {
-      double dN[3];  // dN_a/dx_c = dN_a/dxi_c * 2 / h_c
-      for (int c = 0; c < 3; ++c) {
-        double v = 0.125 * kCorner[a][c];
-        for (int o = 0; o < 3; ++o)
-          if (o != c) v *= 1.0 + xi[o] * kCorner[a][o];
-        dN[c] = v * 2.0 / size[c];
-      }
+      const auto dN = G.col(a);
       B(0, 3 * a + 0) = dN[0];
       B(1, 3 * a + 1) = dN[1];
       B(2, 3 * a + 2) = dN[2];

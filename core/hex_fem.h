@@ -29,6 +29,11 @@ struct HexMesh {
   std::vector<Eigen::Vector3d> element_size;      // edge lengths (hx, hy, hz) per distinct element size
 };
 
+// dN_a/dx (column a, local node order above) of the trilinear shape functions of an
+// hx x hy x hz brick at natural coordinates xi in [-1, 1]^3.
+using BrickGradients = Eigen::Matrix<double, 3, 8>;
+BrickGradients brick_shape_gradients(const Eigen::Vector3d& size, const double xi[3]);
+
 // K_e of an hx x hy x hz brick, Lame parameters lambda, mu: 2x2x2 Gauss points, or
 // (volumetric = reduced) the lambda part at the centre only (selective reduced integration).
 ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, double mu,

@@ -53,7 +53,7 @@ void check_time_step(const Model& model) {
   char text[512];
   std::snprintf(text, sizeof text,
                 "%g s is outside the measured stable envelope of %s with the %s model: dt <= c dx_min / c_p = "
-                "%.3g x %.4g m / %.4g m/s = %.4g s (docs/stability.md). Use a smaller dt, implicit_euler, or set "
+                "%.3g x %.4g m / %.4g m/s = %.4g s (docs/stability.md). Use a smaller dt, or set "
                 "integrator.allow_unstable_dt to true to run anyway",
                 in.dt, to_string(in.type), model.scene.model.c_str(), envelope_constant(model), model.min_spacing,
                 envelope_wave_speed(model), dt_max);

@@ -35,9 +35,11 @@ mkdir -p "$out"
 echo "== reference" >&2
 "$bin/palpate-reference" --scene scenes/hertz_cube_graded.json "${sets[@]}" --out "$out/reference.json"
 verify=("$bin/palpate-verify" --reference "$out/reference.json" --json --quiet "${sets[@]}")
-# The 33^3 member of the reference family (first spacing as palpate-reference uses it),
-# symplectic Euler at 1 ms (stable there for nu <= 0.45).
-fem33=(--scene scenes/hertz_cube_graded_fem.json --per-edge 33 --set body.distribution.first_spacing=0.0152679
+# The 33^3 member of the reference family (its first spacing read from the reference's
+# levels), symplectic Euler at 1 ms (stable there for nu <= 0.45).
+first33=$(/usr/bin/python3 -c 'import json, sys
+print(next(l["first_spacing"] for l in json.load(open(sys.argv[1]))["levels"] if l["per_edge"] == 33))' "$out/reference.json")
+fem33=(--scene scenes/hertz_cube_graded_fem.json --per-edge 33 --set body.distribution.first_spacing=$first33
        --set integrator.type=symplectic_euler --set integrator.dt=0.001)
 run() {
   local name=$1; shift

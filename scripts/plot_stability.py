@@ -33,6 +33,13 @@ def num(text):
         return float("nan")
 
 
+def save(fig, d, name):
+    """Writes the figure to d/name and closes it."""
+    fig.tight_layout()
+    fig.savefig(os.path.join(d, name), dpi=130)
+    plt.close(fig)
+
+
 def envelope(d):
     r = rows(os.path.join(d, "envelope.csv"))
     if not r:
@@ -59,9 +66,7 @@ def envelope(d):
     ax.set_xticklabels(labels, fontsize=5.5)
     ax.legend(fontsize=7)
     ax.set_title("Stable envelope (bisection; blue RK4, orange symplectic Euler, green implicit Euler)")
-    fig.tight_layout()
-    fig.savefig(os.path.join(d, "envelope.png"), dpi=130)
-    plt.close(fig)
+    save(fig, d, "envelope.png")
 
 
 def large_force(d):
@@ -88,9 +93,7 @@ def large_force(d):
     for ax in axes:
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(os.path.join(d, "large_force.png"), dpi=130)
-    plt.close(fig)
+    save(fig, d, "large_force.png")
 
 
 def inversion(d):
@@ -121,9 +124,7 @@ def inversion(d):
     axes[1].legend(fontsize=8)
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(os.path.join(d, "inversion.png"), dpi=130)
-    plt.close(fig)
+    save(fig, d, "inversion.png")
 
 
 def zero_energy(d):
@@ -153,9 +154,7 @@ def zero_energy(d):
             ax.set_title(f"{cloud}: {pert}", fontsize=9)
             ax.legend(fontsize=7)
             ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(os.path.join(d, "zero_energy.png"), dpi=130)
-    plt.close(fig)
+    save(fig, d, "zero_energy.png")
 
 
 def long_run(d):
@@ -175,9 +174,7 @@ def long_run(d):
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.suptitle("Long run: periodic command, stroboscopic samples (one per period)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(os.path.join(d, "long_run.png"), dpi=130)
-    plt.close(fig)
+    save(fig, d, "long_run.png")
 
 
 def main():

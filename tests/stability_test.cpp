@@ -9,6 +9,8 @@
 //    recover with k_v > 0.
 #include <gtest/gtest.h>
 
+#include <Eigen/LU>
+
 #include <cmath>
 #include <string>
 
@@ -107,6 +109,31 @@ TEST(StabilityTest, InvertedParticlesRecoverOnlyWithTheVolumeTerm) {
   EXPECT_EQ(recovered.inverted, 0);
   EXPECT_GT(recovered.min_jacobian, 0.99);
   EXPECT_LT(residual, 1e-3 * base.min_spacing);
+}
+
+}  // namespace
+}  // namespace palpate
+
+namespace palpate {
+namespace {
+
+// The inversion diagnostic of the hex FEM (det F at the Gauss points, smallest per
+// brick) against an affine motion x = A X: every brick reports det A exactly; a
+// mirror (det < 0) is reported inverted everywhere.
+TEST(Diagnostics, BrickJacobiansOfAnAffineMotionAreItsDeterminant) {
+  const Model m = build_model(load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/hertz_cube_graded_fem.json",
+                                         {{"body.distribution.per_edge", "5"}, {"body.distribution.first_spacing", "0.2"}}));
+  Mat3 A;
+  A << 1.2, 0.1, 0.0, -0.05, 0.9, 0.2, 0.0, 0.1, 1.1;
+  const Points x = A * m.rest_position;
+  const InversionSummary s = inversion_summary(m, x);
+  EXPECT_EQ(s.points, m.hex.element_count);
+  EXPECT_EQ(s.inverted, 0);
+  std::vector<double> det;
+  jacobian_determinants(m, x, det);
+  for (double J : det) EXPECT_NEAR(J, A.determinant(), 1e-12);
+  const Mat3 mirror = Vec3(-1, 1, 1).asDiagonal();
+  EXPECT_EQ(inversion_summary(m, mirror * m.rest_position).inverted, m.hex.element_count);
 }
 
 }  // namespace
