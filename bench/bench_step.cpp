@@ -15,7 +15,8 @@
 #include <string>
 #include <vector>
 
-#include "clients/cli.h"
+#include "cli/arguments.h"
+#include "core/checkpoint.h"
 #include "core/contact.h"
 #include "core/health.h"
 #include "core/integrators.h"
@@ -47,29 +48,6 @@ integrator with the indenter pressed into the body; prints medians.
   --min-contacts N  (default 4)
   --json            print one JSON object instead of the table
 )";
-
-// What a timed step starts from.
-struct Snapshot {
-  Points position, velocity;
-  Vec3 indenter_center;
-  double indenter_velocity = 0, force_command = 0, time = 0;
-  int64_t tick = 0;
-};
-
-Snapshot take(const State& s) {
-  return {s.position, s.velocity, s.indenter_center, s.indenter_velocity, s.force_command, s.time, s.tick};
-}
-
-// Restores the start of a step (no allocation: the shapes match).
-void restore(State& s, const Snapshot& snap) {
-  s.position = snap.position;
-  s.velocity = snap.velocity;
-  s.indenter_center = snap.indenter_center;
-  s.indenter_velocity = snap.indenter_velocity;
-  s.force_command = snap.force_command;
-  s.time = snap.time;
-  s.tick = snap.tick;
-}
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -116,27 +94,35 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  Scene scene;
   Model model;
   try {
-    model = build_model(load_scene(scene_file, overrides));
+    scene = load_scene(scene_file, overrides);
+    model = build_model(scene);
   } catch (const std::exception& e) {
     std::cerr << "palpate-bench-step: " << e.what() << "\n";
     return 1;
   }
-  const IntegratorSpec scene_integrator = model.scene.integrator;
+  const Options scene_options = options_of(scene);
   const int n = model.particle_count;
   const bool is_mls = model.solid == SolidKind::mls;
   // Neighbour pairs of the MLS supports (the hex FEM has none: its particles are lattice nodes).
   const int nnz = is_mls && !model.neighbor_offset.empty() ? model.neighbor_offset.back() : 0;
 
-  // Press the indenter in with RK4 (the scene's dt and damping) until it touches.
-  model.scene.integrator.type = IntegratorType::rk4;
-  State pressed = make_state(model);
+  // One set of options per integrator (the scene's dt and damping; implicit Euler at --ie-dt).
+  Options rk4_opt = scene_options, se_opt = scene_options, ie_opt = scene_options;
+  rk4_opt.integrator.type = IntegratorType::rk4;
+  se_opt.integrator.type = IntegratorType::symplectic_euler;
+  ie_opt.integrator.type = IntegratorType::implicit_euler;
+  ie_opt.integrator.dt = ie_dt;
+
+  // Press the indenter in with RK4 until it touches.
+  State pressed = make_state(model, rk4_opt);
   pressed.force_command = press_force;
   int pressing = 0;
   auto too_few = [&] { return static_cast<int>(pressed.contact_index.size()) < min_contacts; };
   for (; pressing < press_steps || (too_few() && pressing < 20 * press_steps); ++pressing) {
-    const StepStatus st = step(model, pressed);
+    const StepStatus st = step(model, rk4_opt, pressed);
     if (st != StepStatus::ok) {
       std::cerr << "palpate-bench-step: pressing in failed at step " << pressing << ": " << to_string(st) << "\n";
       return 1;
@@ -148,18 +134,12 @@ int main(int argc, char** argv) {
               << " steps of pressing (want " << min_contacts << ")\n";
     return 1;
   }
-  const Snapshot start = take(pressed);
+  // Every timed operation starts from the pressed state (positions, velocities, indenter
+  // and contact set), restored without allocation; one State serves all integrators.
+  const Checkpoint start(pressed);
+  State& timed = pressed;
   bool all_ok = true;
   auto check = [&](StepStatus st) { all_ok = all_ok && st == StepStatus::ok; };
-
-  // One model and state per integrator (the integrator is read from the model's scene).
-  Model rk4_model = model, se_model = model, ie_model = model;
-  rk4_model.scene.integrator = se_model.scene.integrator = ie_model.scene.integrator = scene_integrator;
-  rk4_model.scene.integrator.type = IntegratorType::rk4;
-  se_model.scene.integrator.type = IntegratorType::symplectic_euler;
-  ie_model.scene.integrator.type = IntegratorType::implicit_euler;
-  ie_model.scene.integrator.dt = ie_dt;
-  State rk4 = make_state(rk4_model), se = make_state(se_model), ie = make_state(ie_model);
   Points f(3, n);
 
   // The timed operations, run round-robin (each after its untimed setup) so that
@@ -171,31 +151,30 @@ int main(int argc, char** argv) {
   };
   enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_free, health, op_count };
   std::vector<Op> ops(op_count);
-  auto restore_rk4 = [&] { restore(rk4, start); };
-  auto restore_se = [&] { restore(se, start); };
-  auto restore_ie = [&] { restore(ie, start); };
+  auto restore = [&] { start.restore(timed); };
+  const Points& start_position = start.saved().position;
   // The force evaluation is timed warm (after an untimed one), as in the stages of a step.
-  auto evaluate_forces = [&] { elastic_forces(model, start.position, f); };
+  auto evaluate_forces = [&] { elastic_forces(model, start_position, f); };
   ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
   // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
   Workspace linearized;
-  linearize_elastic(model, start.position, linearized);
+  linearize_elastic(model, start_position, linearized);
   Points df(3, n);
-  auto apply_tangent = [&] { elastic_force_differential(model, linearized, start.velocity, df); };
+  auto apply_tangent = [&] { elastic_force_differential(model, linearized, start.saved().velocity, df); };
   ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
-  ops[rk4_step] = {restore_rk4, [&] { check(step(rk4_model, rk4)); }, repeats, {}};
-  ops[rk4_free] = {restore_rk4, [&] { free_motion_rk4(rk4_model, rk4); }, repeats, {}};
-  ops[rk4_contact] = {[&] { restore(rk4, start); free_motion_rk4(rk4_model, rk4); },
-                      [&] { check(solve_contact(rk4_model, rk4)); }, repeats, {}};
-  ops[se_step] = {restore_se, [&] { check(step(se_model, se)); }, repeats, {}};
-  ops[se_free] = {restore_se, [&] { free_motion_symplectic_euler(se_model, se); }, repeats, {}};
+  ops[rk4_step] = {restore, [&] { check(step(model, rk4_opt, timed)); }, repeats, {}};
+  ops[rk4_free] = {restore, [&] { free_motion_rk4(model, rk4_opt, timed); }, repeats, {}};
+  ops[rk4_contact] = {[&] { restore(); free_motion_rk4(model, rk4_opt, timed); },
+                      [&] { check(solve_contact(model, rk4_opt, timed)); }, repeats, {}};
+  ops[se_step] = {restore, [&] { check(step(model, se_opt, timed)); }, repeats, {}};
+  ops[se_free] = {restore, [&] { free_motion_symplectic_euler(model, se_opt, timed); }, repeats, {}};
   // Linearly implicit Euler with a larger step: CG for the free motion plus one CG
   // solve per contact candidate for the coupled contact response.
-  ops[ie_step] = {restore_ie, [&] { check(step(ie_model, ie)); }, ie_repeats, {}};
-  ops[ie_free] = {restore_ie, [&] { free_motion_implicit_euler(ie_model, ie); }, ie_repeats, {}};
+  ops[ie_step] = {restore, [&] { check(step(model, ie_opt, timed)); }, ie_repeats, {}};
+  ops[ie_free] = {restore, [&] { free_motion_implicit_euler(model, ie_opt, timed); }, ie_repeats, {}};
   // The per-step health checks alone (core/health.h; part of every step above).
-  ops[health] = {[&] { restore(se, start); free_motion_symplectic_euler(se_model, se); check(solve_contact(se_model, se)); },
-                 [&] { (void)check_health(se_model, se, StepStatus::ok); }, repeats, {}};
+  ops[health] = {[&] { restore(); free_motion_symplectic_euler(model, se_opt, timed); check(solve_contact(model, se_opt, timed)); },
+                 [&] { (void)check_health(model, se_opt, timed, StepStatus::ok); }, repeats, {}};
   for (Op& op : ops) op.ms.reserve(op.repeats);
   for (int r = 0; r < std::max(repeats, ie_repeats); ++r)
     for (Op& op : ops) {
@@ -210,25 +189,25 @@ int main(int argc, char** argv) {
   // Counted for the MLS solid with the St Venant-Kirchhoff law only (the other laws' per-particle
   // arithmetic, the polar iteration above all, is data dependent).
   const bool flops_counted = is_mls && model.law == MaterialLaw::stvk;
-  const double flops = flops_counted ? internal_forces_flops(model) : 0.0;
+  const double flops = flops_counted ? mls_internal_forces_flops(model) : 0.0;
   const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
                rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
                ie_ms = med(ie_step), ie_free_ms = med(ie_free), health_ms = med(health);
 
   // What the last timed steps did (every repetition does the same).
-  restore(rk4, start);
-  check(step(rk4_model, rk4));
-  const int rk4_contacts = static_cast<int>(rk4.contact_index.size());
-  const int rk4_candidates = static_cast<int>(rk4.work.candidate.size());
-  restore(ie, start);
-  check(step(ie_model, ie));
-  const int ie_cg_iterations = ie.cg_iterations;
-  const int ie_candidates = static_cast<int>(ie.work.candidate.size());
-  const int ie_contacts = static_cast<int>(ie.contact_index.size());
+  restore();
+  check(step(model, rk4_opt, timed));
+  const int rk4_contacts = static_cast<int>(timed.contact_index.size());
+  const int rk4_candidates = static_cast<int>(timed.out.contact_candidate.size());
+  restore();
+  check(step(model, ie_opt, timed));
+  const int ie_cg_iterations = timed.out.cg_iterations;
+  const int ie_candidates = static_cast<int>(timed.out.contact_candidate.size());
+  const int ie_contacts = static_cast<int>(timed.contact_index.size());
 
   const double gflops = flops / (force_eval_ms * 1e6);
   nlohmann::json j;
-  j["scene"] = model.scene.name;
+  j["scene"] = model.name;
   j["model"] = is_mls ? "mls" : "hex_fem";
   j["particles"] = n;
   j["fixed_particles"] = model.fixed_count;
@@ -236,7 +215,7 @@ int main(int argc, char** argv) {
   j["contacts"] = contacts;
   j["press_steps"] = pressing;
   j["repeats"] = repeats;
-  j["dt"] = scene_integrator.dt;
+  j["dt"] = scene_options.integrator.dt;
   j["force_eval_ms"] = force_eval_ms;
   j["force_eval_flops"] = flops_counted ? nlohmann::json(flops) : nlohmann::json(nullptr);
   j["force_eval_gflops"] = flops_counted ? nlohmann::json(gflops) : nlohmann::json(nullptr);
@@ -277,14 +256,14 @@ int main(int argc, char** argv) {
     std::cout << j.dump() << "\n";
   } else {
     std::printf("palpate-bench-step: %s, %d particles (%d fixed), %d neighbour pairs (%.2f per particle)\n",
-                model.scene.name.c_str(), n, model.fixed_count, nnz, double(nnz) / n);
+                model.name.c_str(), n, model.fixed_count, nnz, double(nnz) / n);
     std::printf("pressed in with %g N for %d RK4 steps: %d particles in contact\n", press_force, pressing, contacts);
     std::printf("medians of %d repetitions (implicit Euler: %d), single thread\n\n", repeats, ie_repeats);
     if (flops_counted)
-      std::printf("  %-34s %10.4f ms   %.2f GFLOP/s (%.3g flop)\n", "internal_forces", force_eval_ms, gflops, flops);
+      std::printf("  %-34s %10.4f ms   %.2f GFLOP/s (%.3g flop)\n", "mls_internal_forces", force_eval_ms, gflops, flops);
     else
-      std::printf("  %-34s %10.4f ms\n", "internal_forces", force_eval_ms);
-    std::printf("  %-34s %10.4f ms\n", "force_differential (K dx)", tangent_ms);
+      std::printf("  %-34s %10.4f ms\n", "mls_internal_forces", force_eval_ms);
+    std::printf("  %-34s %10.4f ms\n", "mls_force_differential (K dx)", tangent_ms);
     std::printf("  %-34s %10.4f ms   (%d contacts)\n", "RK4 step", rk4_ms, rk4_contacts);
     std::printf("  %-34s %10.4f ms\n", "  4 force evaluations", 4 * force_eval_ms);
     std::printf("  %-34s %10.4f ms\n", "  vector updates (free motion rest)", rk4_free_ms - 4 * force_eval_ms);

@@ -99,18 +99,17 @@ void build_force_blocks(Model& m) {
 }
 
 // Material (Lame parameters from E, nu).
-void set_material(Model& m) {
-  const MaterialSpec& mat = m.scene.material;
+void set_material(Model& m, const MaterialSpec& mat) {
   m.lame_lambda = mat.young_modulus * mat.poisson_ratio / ((1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio));
   m.lame_mu = mat.young_modulus / (2 * (1 + mat.poisson_ratio));
   m.volume_stiffness = mat.volume_stiffness;
   m.law = mat.law;
+  m.density = mat.density;
   m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / mat.density);
 }
 
 // The MLS solid: supports, volumes, moment matrices, gradient weights, hourglass weights.
-void build_mls(Model& m, const NodeCloud& cloud) {
-  const Scene& scene = m.scene;
+void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
   const int n = m.particle_count;
   const Points& X = m.rest_position;
   const int k = scene.mls.neighbors;
@@ -267,13 +266,13 @@ void build_mls(Model& m, const NodeCloud& cloud) {
 
 // The hexahedral FEM reference: the lattice's bricks, lumped masses (rho times the
 // nodes' lattice volumes = the row sums of the consistent mass of trilinear bricks).
-void build_hex_fem(Model& m, const NodeCloud& cloud) {
+void build_hex_fem(Model& m, const HexFemSpec& spec, const NodeCloud& cloud) {
   m.solid = SolidKind::hex_fem;
-  m.hex = hex_mesh(m.rest_position, cloud.lattice_size, m.lame_lambda, m.lame_mu, m.scene.hex_fem.formulation,
-                    m.scene.hex_fem.volumetric_integration);
+  m.hex = hex_mesh(m.rest_position, cloud.lattice_size, m.lame_lambda, m.lame_mu, spec.formulation,
+                   spec.volumetric_integration);
   m.volume = cloud.lattice_volume;
   m.mass.resize(m.particle_count);
-  for (int i = 0; i < m.particle_count; ++i) m.mass[i] = m.scene.material.density * m.volume[i];
+  for (int i = 0; i < m.particle_count; ++i) m.mass[i] = m.density * m.volume[i];
   m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
   m.min_spacing = INFINITY;
   for (const Vec3& size : m.hex.element_size) {
@@ -283,8 +282,7 @@ void build_hex_fem(Model& m, const NodeCloud& cloud) {
 }
 
 // Fixed particles and the indenter's placement (both models).
-void set_boundary_and_indenter(Model& m) {
-  const Scene& scene = m.scene;
+void set_boundary_and_indenter(Model& m, const Scene& scene) {
   const int n = m.particle_count;
   const Points& X = m.rest_position;
   // Boundary conditions.
@@ -293,11 +291,12 @@ void set_boundary_and_indenter(Model& m) {
   for (int i = 0; i < n; ++i) {
     m.inverse_mass[i] = m.fixed[i] ? 0.0 : 1.0 / m.mass[i];
     m.fixed_count += m.fixed[i];
+    if (!m.fixed[i]) m.free_mass += m.mass[i];
   }
 
   // Indenter: centred over the top face and just touching it unless placed by the scene.
   m.indenter_radius = scene.indenter.radius;
-  m.indenter_mass = scene.indenter.mass;
+  m.initial_force_command = scene.indenter.force;
   const Vec3 centre_xy = 0.5 * (X.rowwise().minCoeff() + X.rowwise().maxCoeff());
   m.indenter_start = scene.indenter.position_given ? scene.indenter.position
                                                    : Vec3(centre_xy[0], centre_xy[1], 0.0);
@@ -322,28 +321,30 @@ void set_boundary_and_indenter(Model& m) {
 
 Model build_model(const Scene& scene) {
   Model m;
-  m.scene = scene;
+  m.name = scene.name;
+  m.source = scene.source;
+  m.distribution = scene.distribution.type;
   const NodeCloud cloud = make_node_cloud(scene);
   m.particle_count = static_cast<int>(cloud.positions.cols());
   m.rest_position = cloud.positions;
   m.mesh_tetrahedra = cloud.mesh_tetrahedra;
   m.mesh_unused_nodes = cloud.mesh_unused_nodes;
   m.box_volume = (scene.box.max - scene.box.min).prod();
-  set_material(m);
+  set_material(m, scene.material);
   if (scene.model == "mls")
-    build_mls(m, cloud);
+    build_mls(m, scene, cloud);
   else if (scene.model == "hex_fem")
-    build_hex_fem(m, cloud);
+    build_hex_fem(m, scene.hex_fem, cloud);
   else
     throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
-  set_boundary_and_indenter(m);
+  set_boundary_and_indenter(m, scene);
   spdlog::debug("model {}: {} particles, {} fixed, {} regularised (worst cond {:.3g}), volume {:.4g} of box {:.4g}",
                 scene.model, m.particle_count, m.fixed_count, m.regularized_count, m.worst_condition,
                 m.total_volume, m.box_volume);
   if (scene.distribution.type == DistributionType::mesh)
     spdlog::debug("mesh {}: {} tetrahedra, {} unused nodes dropped", scene.distribution.mesh_file.string(),
                   m.mesh_tetrahedra, m.mesh_unused_nodes);
-  check_time_step(m);
+  check_options(m, options_of(scene));
   return m;
 }
 

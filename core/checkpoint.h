@@ -1,8 +1,10 @@
 #pragma once
-// A saved copy of the fields of a State that carry over between steps (the
-// Workspace is scratch), to return to the last good state after a failed health
-// check (health.h). Storage is allocated once: saving and restoring allocate nothing.
-#include <vector>
+// A saved copy of the CarriedState of a State (state.h: what one step hands to the
+// next), to return to an earlier state: the last good state after a failed health
+// check (health.h), the rest state of a session, a rejected step of the static
+// solve, a benchmark's starting point. Storage is allocated once: after the first
+// save, saving and restoring a State of the same model allocate nothing.
+#include <cstdint>
 
 #include "core/state.h"
 
@@ -12,19 +14,17 @@ class Checkpoint {
  public:
   explicit Checkpoint(const State& s);
   void save(const State& s);
-  // Physical fields and the health bookkeeping (energy budget); time, tick and the
-  // force command stay the caller's. The restored state's last report is cleared.
+  // Everything carried (positions, velocities, indenter, contact set, health
+  // bookkeeping) except the clock and the input: time, tick and the force command
+  // stay the caller's (a session's tick keeps running through a recovery, and the
+  // command is what the user last asked for). The restored state's last health
+  // report is cleared.
   void restore(State& s) const;
-  int64_t tick() const { return tick_; }
+  int64_t tick() const { return saved_.tick; }
+  const CarriedState& saved() const { return saved_; }
 
  private:
-  Points position_, velocity_, contact_force_;
-  Vec3 indenter_center_{0, 0, 0};
-  double indenter_velocity_ = 0.0, indenter_contact_force_ = 0.0;
-  std::vector<int> contact_index_;
-  std::vector<double> contact_multiplier_;
-  HealthMonitor health_;
-  int64_t tick_ = 0;
+  CarriedState saved_;
 };
 
 }  // namespace palpate

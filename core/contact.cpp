@@ -109,25 +109,26 @@ int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda,
   return sweeps < 0 ? -1 : max_iterations + sweeps;
 }
 
-StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupled) {
+StepStatus solve_contact(const Model& model, const Options& opt, State& state, LinearResponse* coupled) {
   Workspace& work = state.work;
   const int n = model.particle_count;
   const double R = model.indenter_radius;
-  const double dt = model.scene.integrator.dt;
+  const double dt = opt.integrator.dt;
   const Vec3 c = state.indenter_center;
-  const double tolerance = model.scene.contact.tolerance;
-  const int max_iterations = model.scene.contact.max_iterations;
+  const double tolerance = opt.contact.tolerance;
+  const int max_iterations = opt.contact.max_iterations;
+  std::vector<int>& candidate = state.out.contact_candidate;
 
   // Candidates: free particles inside the sphere after the free motion, and the
   // particles in contact at the previous step (their force was part of the free motion).
-  work.candidate.clear();
+  candidate.clear();
   work.gap.clear();
   work.previous_multiplier.clear();
   auto add_candidate = [&](int i) {
     const Vec3 r = state.position.col(i) - c;
     const double dist = r.norm();
-    const int a = static_cast<int>(work.candidate.size());
-    work.candidate.push_back(i);
+    const int a = static_cast<int>(candidate.size());
+    candidate.push_back(i);
     work.gap.push_back(dist - R);
     work.normal.col(a) = dist > 0 ? Vec3(r / dist) : Vec3(0, 0, -1);
     work.previous_multiplier.push_back(0.0);
@@ -146,20 +147,20 @@ StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupl
     work.previous_force.col(a) = f;
     work.previous_multiplier[a] = f.dot(work.normal.col(a));  // along this step's normal
   }
-  const int m = static_cast<int>(work.candidate.size());
-  for (int a = 0; a < m; ++a) work.candidate_slot[work.candidate[a]] = -1;
+  const int m = static_cast<int>(candidate.size());
+  for (int a = 0; a < m; ++a) work.candidate_slot[candidate[a]] = -1;
   state.contact_index.clear();
-  state.contact_multiplier.clear();
+  state.contact_normal_force.clear();
   state.indenter_contact_force = 0.0;
-  state.contact_iterations = 0;
-  state.contact_max_penetration = 0.0;
+  state.out.contact_iterations = 0;
+  state.out.contact_max_penetration = 0.0;
   if (m == 0) return StepStatus::ok;
 
   // Delassus operator W = dt^2 J M^-1 J^T, the sphere's vertical column included:
   // W_ab = dt^2 [ n_a . (response of particle a to a unit force n_b on b) + a_a a_b / M ],
   // a_a = n_a . e_z.
   const double dt2 = dt * dt;
-  const double inv_sphere_mass = 1.0 / model.indenter_mass;
+  const double inv_sphere_mass = 1.0 / opt.indenter_mass;
   work.delassus.resize(static_cast<size_t>(m) * m);
   double* W = work.delassus.data();
   if (coupled) {
@@ -167,17 +168,17 @@ StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupl
       work.contact_response.resize(3, static_cast<Eigen::Index>(n) * m);
     for (int b = 0; b < m; ++b) {
       work.rhs.setZero();
-      work.rhs.col(work.candidate[b]) = work.normal.col(b);
+      work.rhs.col(candidate[b]) = work.normal.col(b);
       Eigen::Map<Points> response(work.contact_response.data() + 3 * static_cast<size_t>(n) * b, 3, n);
       coupled->solve(work.rhs, work.dv);
       response = work.dv;
-      for (int a = 0; a < m; ++a) W[a * m + b] = dt2 * work.normal.col(a).dot(response.col(work.candidate[a]));
+      for (int a = 0; a < m; ++a) W[a * m + b] = dt2 * work.normal.col(a).dot(response.col(candidate[a]));
     }
     for (int a = 0; a < m; ++a)  // symmetrise the CG round-off
       for (int b = 0; b < a; ++b) W[a * m + b] = W[b * m + a] = 0.5 * (W[a * m + b] + W[b * m + a]);
   } else {
     for (int a = 0; a < m; ++a)
-      for (int b = 0; b < m; ++b) W[a * m + b] = (a == b) ? dt2 * model.inverse_mass[work.candidate[a]] : 0.0;
+      for (int b = 0; b < m; ++b) W[a * m + b] = (a == b) ? dt2 * model.inverse_mass[candidate[a]] : 0.0;
   }
   for (int a = 0; a < m; ++a)
     for (int b = 0; b < m; ++b) W[a * m + b] += dt2 * inv_sphere_mass * work.normal(2, a) * work.normal(2, b);
@@ -189,7 +190,7 @@ StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupl
   auto apply = [&](const double* total, double gain, Points& particles, double& indenter) {
     double sphere_force = 0.0, sphere_previous = 0.0;
     for (int a = 0; a < m; ++a) {
-      const int i = work.candidate[a];
+      const int i = candidate[a];
       const Vec3 f = total[a] * work.normal.col(a);
       if (!coupled) {
         particles.col(i) += (gain * model.inverse_mass[i]) * (f - work.previous_force.col(a));
@@ -215,7 +216,7 @@ StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupl
   shift_by_previous(work.gap.data());
   int iterations = solve_signorini_lcp(m, W, work.gap.data(), lambda, tolerance, max_iterations, work);
   bool converged = iterations >= 0;
-  state.contact_iterations = std::max(iterations, 0);
+  state.out.contact_iterations = std::max(iterations, 0);
   apply(lambda, dt2, state.position, state.indenter_center[2]);
 
   // Gaps after the projection: who is touching, and the penetration left.
@@ -223,7 +224,7 @@ StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupl
     double w = work.gap[a];
     for (int b = 0; b < m; ++b) w += W[a * m + b] * lambda[b];
     work.gap[a] = w;
-    state.contact_max_penetration = std::max(state.contact_max_penetration, -w);
+    state.out.contact_max_penetration = std::max(state.out.contact_max_penetration, -w);
   }
 
   // 2. Velocity projection on the touching particles; the others are given an
@@ -231,7 +232,7 @@ StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupl
   // u_a = n_a . (v_i - v_indenter e_z), posed as u dt with W (= W_v dt).
   for (int a = 0; a < m; ++a) {
     const bool touching = work.gap[a] <= 10 * tolerance;
-    const Vec3 v_rel = state.velocity.col(work.candidate[a]) - Vec3(0, 0, state.indenter_velocity);
+    const Vec3 v_rel = state.velocity.col(candidate[a]) - Vec3(0, 0, state.indenter_velocity);
     work.gap[a] = work.normal.col(a).dot(v_rel) * dt;
     if (!touching) work.gap[a] = INFINITY;
   }
@@ -239,14 +240,14 @@ StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupl
   double* mu = lambda;  // lambda has been applied: reuse its buffer
   iterations = solve_signorini_lcp(m, W, work.gap.data(), mu, tolerance, max_iterations, work);
   converged = converged && iterations >= 0;
-  state.contact_iterations += std::max(iterations, 0);
+  state.out.contact_iterations += std::max(iterations, 0);
   // mu is the contact force of the step (momentum exchanged / dt): the state reports it.
   state.indenter_contact_force = apply(mu, dt, state.velocity, state.indenter_velocity);
   for (int a = 0; a < m; ++a) {
     if (mu[a] <= 0.0) continue;
     const int slot = static_cast<int>(state.contact_index.size());
-    state.contact_index.push_back(work.candidate[a]);
-    state.contact_multiplier.push_back(mu[a]);
+    state.contact_index.push_back(candidate[a]);
+    state.contact_normal_force.push_back(mu[a]);
     state.contact_force.col(slot) = mu[a] * work.normal.col(a);
   }
   return converged ? StepStatus::ok : StepStatus::contact_not_converged;

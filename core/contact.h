@@ -18,6 +18,7 @@
 // fixed point of every integrator (the free motion pushes in, the projections
 // push back exactly). For implicit Euler, M is replaced by the step operator A.
 #include "core/model.h"
+#include "core/options.h"
 #include "core/state.h"
 
 namespace palpate {
@@ -33,7 +34,7 @@ class LinearResponse {
 // particles respond through their lumped inverse masses (explicit integrators). Returns
 // contact_not_converged when neither pivoting nor projected Gauss-Seidel met the
 // tolerance (the best multipliers found are still applied).
-StepStatus solve_contact(const Model& model, State& state, LinearResponse* coupled = nullptr);
+StepStatus solve_contact(const Model& model, const Options& opt, State& state, LinearResponse* coupled = nullptr);
 
 // Solves the LCP  w = g + W lambda, lambda >= 0, w >= -tolerance, lambda . w = 0 for a
 // symmetric positive definite W (m x m, row-major). Returns the number of pivots

@@ -22,20 +22,20 @@ struct EnergyPass {
   double position_sum = 0.0;
 };
 
-EnergyPass energy_pass(const Model& model, const State& state) {
+EnergyPass energy_pass(const Model& model, const Options& opt, const State& state) {
   const int n = model.particle_count;
   const auto mass = Eigen::Map<const Eigen::VectorXd>(model.mass.data(), n);
   EnergyPass e;
   // Flat, vectorisable reductions over the 3 x n arrays the step has just written.
   e.kinetic = 0.5 * state.velocity.colwise().squaredNorm().dot(mass.transpose()) +
-              0.5 * model.indenter_mass * state.indenter_velocity * state.indenter_velocity;
+              0.5 * opt.indenter_mass * state.indenter_velocity * state.indenter_velocity;
   e.position_sum = state.position.sum();
-  const Vec3& g = model.scene.gravity;
+  const Vec3& g = opt.gravity;
   if (g.squaredNorm() > 0) {  // a plain loop: the matrix product would allocate a 1 x n temporary
     const double* x = state.position.data();
     double potential = 0.0;
     for (int i = 0; i < n; ++i) potential += mass[i] * (g[0] * x[3 * i] + g[1] * x[3 * i + 1] + g[2] * x[3 * i + 2]);
-    e.gravity_potential = potential + model.indenter_mass * g.dot(state.indenter_center);
+    e.gravity_potential = potential + opt.indenter_mass * g.dot(state.indenter_center);
   }
   return e;
 }
@@ -47,27 +47,23 @@ StepStatus fail(State& state, StepStatus status, int particle, double value, dou
 
 }  // namespace
 
-HealthLimits health_limits(const Model& model) {
-  const HealthSpec& spec = model.scene.health;
-  const double dt = model.scene.integrator.dt;
+HealthLimits health_limits(const Model& model, const Options& opt) {
+  const HealthSpec& spec = opt.health;
+  const double dt = opt.integrator.dt;
   HealthLimits l;
   l.energy_factor = spec.energy_factor;
-  double body_mass = 0.0;
-  for (int i = 0; i < model.particle_count; ++i)
-    if (!model.fixed[i]) body_mass += model.mass[i];
-  l.energy_floor = 0.5 * body_mass * 1e-4;  // 1/2 M (1 cm/s)^2
+  l.energy_floor = 0.5 * model.free_mass * 1e-4;  // 1/2 M (1 cm/s)^2
   l.max_indenter_speed = spec.max_indenter_speed > 0 ? spec.max_indenter_speed : model.min_spacing / dt;
   l.max_penetration =
-      spec.max_penetration > 0 ? spec.max_penetration : model.scene.contact.tolerance + 0.05 * model.min_spacing;
+      spec.max_penetration > 0 ? spec.max_penetration : opt.contact.tolerance + 0.05 * model.min_spacing;
   if (model.solid == SolidKind::mls)
     l.inversion_window = (model.particle_count + spec.inversion_sweep_ticks - 1) / spec.inversion_sweep_ticks;
   return l;
 }
 
-void reset_health(const Model& model, State& state) {
+void reset_health(const Model& model, const Options& opt, State& state) {
   HealthMonitor& h = state.health;
-  h.limits = health_limits(model);
-  const EnergyPass e = energy_pass(model, state);
+  const EnergyPass e = energy_pass(model, opt, state);
   const double strain = elastic_energy(model, state.position);
   h.energy_input = e.kinetic + strain;
   h.energy_budget = h.energy_input;
@@ -77,22 +73,22 @@ void reset_health(const Model& model, State& state) {
   h.inversion_cursor = 0;
 }
 
-StepStatus check_health(const Model& model, State& state, StepStatus status) {
+StepStatus check_health(const Model& model, const Options& opt, State& state, StepStatus status) {
   HealthMonitor& h = state.health;
-  const HealthLimits& limits = h.limits;
+  const HealthLimits limits = health_limits(model, opt);
 
   // Non-finite values, with the kinetic energy: from the explicit integrators' update
   // pass when they took it (its velocities are before the contact impulses, which touch
   // a few particles: the energy limit is a factor 10 wide), else one pass here.
   EnergyPass e;
-  Workspace& w = state.work;
-  if (w.free_motion_sums_valid && model.scene.gravity.squaredNorm() == 0) {
-    e.kinetic = w.free_motion_kinetic + 0.5 * model.indenter_mass * state.indenter_velocity * state.indenter_velocity;
-    e.position_sum = w.free_motion_position_sum;
+  StepOutputs& out = state.out;
+  if (out.free_motion_sums_valid && opt.gravity.squaredNorm() == 0) {
+    e.kinetic = out.free_motion_kinetic + 0.5 * opt.indenter_mass * state.indenter_velocity * state.indenter_velocity;
+    e.position_sum = out.free_motion_position_sum;
   } else {
-    e = energy_pass(model, state);
+    e = energy_pass(model, opt, state);
   }
-  w.free_motion_sums_valid = false;
+  out.free_motion_sums_valid = false;
   if (!std::isfinite(e.kinetic + e.position_sum + state.indenter_center.sum() + state.indenter_contact_force))
     return fail(state, StepStatus::non_finite, -1, NAN, 0.0);
   if (status != StepStatus::ok) return fail(state, status, -1, 0.0, 0.0);
@@ -112,7 +108,7 @@ StepStatus check_health(const Model& model, State& state, StepStatus status) {
 
   // Penetration: the true gap |x_i - c| - R of this step's contact candidates.
   const double R = model.indenter_radius;
-  for (const int i : state.work.candidate) {
+  for (const int i : state.out.contact_candidate) {
     const double gap = (state.position.col(i) - state.indenter_center).norm() - R;
     if (!std::isfinite(gap)) return fail(state, StepStatus::non_finite, i, gap, 0.0);
     if (-gap > limits.max_penetration) return fail(state, StepStatus::penetration, i, -gap, limits.max_penetration);

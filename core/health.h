@@ -1,5 +1,5 @@
 #pragma once
-// Per-step health checks (scene field "health"): the last stage of step(). Cheap
+// Per-step health checks (Options::health, scene field "health"): the last stage of step(). Cheap
 // by construction — one pass over the velocities, the contact candidates, and a
 // rotating window of deformation gradients — so that a numerical blow-up is caught
 // on the tick it happens, with its reason, before the state leaves the core.
@@ -23,21 +23,25 @@
 #include <string>
 
 #include "core/model.h"
+#include "core/options.h"
 #include "core/state.h"
 
 namespace palpate {
 
 // Runs the checks after a step; `status` is what the step's stages reported.
 // Returns the first failure (or `status`), and records it in state.health.report.
-StepStatus check_health(const Model& model, State& state, StepStatus status);
+StepStatus check_health(const Model& model, const Options& opt, State& state, StepStatus status);
 
 // Restarts the energy budget from the state as it is (initial energy = kinetic +
-// strain energy: one energy evaluation). make_state() calls it; so must whoever
-// sets or restores a state by hand (Checkpoint::restore does).
-void reset_health(const Model& model, State& state);
+// strain energy: one energy evaluation; the gravity potential under opt.gravity).
+// make_state() calls it; so must whoever sets a state by hand (a restored Checkpoint
+// carries its own budget).
+void reset_health(const Model& model, const Options& opt, State& state);
 
-// The limits for a model (the scene's, or derived from the model where the scene says 0).
-HealthLimits health_limits(const Model& model);
+// The limits in force: opt.health's, or derived from the model and opt (dt, contact
+// tolerance) where opt.health says 0. Cheap: check_health derives them every step,
+// so changed options take effect at once.
+HealthLimits health_limits(const Model& model, const Options& opt);
 
 // "energy jump at tick 1234: kinetic energy 5.2 J above the limit 3.1 J (10 x budget + floor)".
 std::string describe(const HealthReport& report);

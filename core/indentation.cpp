@@ -1,42 +1,7 @@
 #include "core/indentation.h"
 
-#include <cmath>
-
 namespace palpate {
 
 double indentation(const Model& model, const State& state) { return model.touch_height - state.indenter_center[2]; }
-
-double max_particle_speed(const State& state) { return std::sqrt(state.velocity.colwise().squaredNorm().maxCoeff()); }
-
-void RestMonitor::start_window(const State& state) {
-  window_start_position_ = state.position;
-  window_start_indenter_ = state.indenter_center[2];
-  held_ = 0.0;
-}
-
-PressResult press_to_rest(const Model& model, State& state, double force) {
-  return press_to_rest(model, state, force, [](const State&) {});
-}
-
-bool RestMonitor::update(const Model& model, const State& state) {
-  const double dt = model.scene.integrator.dt;
-  const double imbalance = std::abs(state.indenter_contact_force - state.force_command);
-  if (imbalance > spec_.force_tolerance * std::max(std::abs(state.force_command), 1e-12)) {
-    held_ = -1.0;
-    return false;
-  }
-  if (held_ < 0.0) {
-    start_window(state);
-    return false;
-  }
-  held_ += dt;
-  if (held_ < spec_.window - 0.5 * dt) return false;
-  const double allowed = spec_.velocity_tolerance * held_;
-  const bool still = std::abs(state.indenter_center[2] - window_start_indenter_) <= allowed &&
-                     (state.position - window_start_position_).colwise().norm().maxCoeff() <= allowed;
-  if (still) return true;
-  start_window(state);  // moved too much: judge the next window
-  return false;
-}
 
 }  // namespace palpate

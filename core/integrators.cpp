@@ -20,8 +20,8 @@ struct Acceleration {
   const double* inverse_mass;
   double damping;
   Vec3 gravity;
-  Acceleration(const Model& model)
-      : inverse_mass(model.inverse_mass.data()), damping(model.scene.integrator.damping), gravity(model.scene.gravity) {}
+  Acceleration(const Model& model, const Options& opt)
+      : inverse_mass(model.inverse_mass.data()), damping(opt.integrator.damping), gravity(opt.gravity) {}
   Vec3 operator()(int i, const double* f, const double* v) const {
     const double inv_m = inverse_mass[i];
     if (inv_m == 0.0) return Vec3::Zero();
@@ -66,24 +66,24 @@ inline void group_accelerations(const Acceleration& acc, int p, const double* f,
 
 }  // namespace
 
-void particle_accelerations(const Model& model, const State& state, const Points& x, const Points& v, Points& force,
-                            Points& acceleration) {
+void particle_accelerations(const Model& model, const Options& opt, const State& state, const Points& x,
+                            const Points& v, Points& force, Points& acceleration) {
   elastic_forces(model, x, force);
   add_contact_forces(state, force);
-  const Acceleration accel(model);
+  const Acceleration accel(model, opt);
   for (int i = 0; i < model.particle_count; ++i)
     acceleration.col(i) = accel(i, force.col(i).data(), v.col(i).data());
 }
 
-double indenter_free_acceleration(const Model& model, const State& state) {
-  return (state.indenter_contact_force - state.force_command) / model.indenter_mass + model.scene.gravity[2];
+double indenter_free_acceleration(const Options& opt, const State& state) {
+  return (state.indenter_contact_force - state.force_command) / opt.indenter_mass + opt.gravity[2];
 }
 
 namespace {
 
 // The indenter under a constant force over the step, integrated exactly.
-void indenter_free_motion(const Model& model, State& state, double dt) {
-  const double a = indenter_free_acceleration(model, state);
+void indenter_free_motion(const Options& opt, State& state, double dt) {
+  const double a = indenter_free_acceleration(opt, state);
   state.indenter_center[2] += dt * state.indenter_velocity + 0.5 * dt * dt * a;
   state.indenter_velocity += dt * a;
 }
@@ -128,7 +128,7 @@ struct MotionSums {
     kinetic += m * v * v;
     position += x;
   }
-  void write(Workspace& w) const {
+  void write(StepOutputs& w) const {
     w.free_motion_kinetic = 0.5 * (kinetic + (kinetic_lanes[0] + kinetic_lanes[1]) + (kinetic_lanes[2] + kinetic_lanes[3]));
     w.free_motion_position_sum = position + (position_lanes[0] + position_lanes[1]) + (position_lanes[2] + position_lanes[3]);
     w.free_motion_sums_valid = true;
@@ -173,8 +173,9 @@ struct SymplecticEulerUpdate {
 // Calls update(k, a_k, m_k) for every coordinate k with the acceleration a(f, v) there
 // and the particle's mass.
 template <class Update>
-void for_each_acceleration(const Model& model, const double* f, const double* v, const Update& update) {
-  const Acceleration accel(model);
+void for_each_acceleration(const Model& model, const Options& opt, const double* f, const double* v,
+                           const Update& update) {
+  const Acceleration accel(model, opt);
   const int n = model.particle_count, groups = n / kGroup;
   const double* mass = model.mass.data();
   for (int p = 0; p < groups; ++p) {
@@ -192,13 +193,13 @@ void for_each_acceleration(const Model& model, const double* f, const double* v,
 
 }  // namespace
 
-void free_motion_rk4(const Model& model, State& state) {
+void free_motion_rk4(const Model& model, const Options& opt, State& state) {
   // Classical RK4 on y = (x, v), y' = (v, a(x, v)), with the stages fused: one pass
   // over the coordinates per stage takes k_s = (v_s, a_s) from the forces at x_s,
   // adds it to the weighted sum k_1 + 2 k_2 + 2 k_3 and forms the next stage
   // (x_{s+1}, v_{s+1}) = (x_0, v_0) + h_{s+1} k_s, h = (dt/2, dt/2, dt); the fourth
   // pass applies the update. state.position, state.velocity hold (x_0, v_0) until then.
-  const double dt = model.scene.integrator.dt;
+  const double dt = opt.integrator.dt;
   Workspace& w = state.work;
   Points& x_stage = w.rk_x[0];  // x_s
   Points& v_stage = w.rk_v[0];  // v_s
@@ -213,28 +214,28 @@ void free_motion_rk4(const Model& model, State& state) {
     add_contact_forces(state, w.force);
     const Rk4Stage stage{state.position.data(), state.velocity.data(), v_s.data(), x_sum.data(), v_sum.data(),
                          x_stage.data(), v_stage.data(), next_h[s], weight[s], s == 0};
-    for_each_acceleration(model, w.force.data(), v_s.data(), stage);
+    for_each_acceleration(model, opt, w.force.data(), v_s.data(), stage);
   }
   elastic_forces(model, x_stage, w.force);
   add_contact_forces(state, w.force);
   MotionSums sums;
   const Rk4Update update{v_stage.data(), x_sum.data(), v_sum.data(), state.position.data(), state.velocity.data(),
                          dt / 6.0, &sums};
-  for_each_acceleration(model, w.force.data(), v_stage.data(), update);
-  sums.write(w);
-  indenter_free_motion(model, state, dt);
+  for_each_acceleration(model, opt, w.force.data(), v_stage.data(), update);
+  sums.write(state.out);
+  indenter_free_motion(opt, state, dt);
 }
 
-void free_motion_symplectic_euler(const Model& model, State& state) {
-  const double dt = model.scene.integrator.dt;
+void free_motion_symplectic_euler(const Model& model, const Options& opt, State& state) {
+  const double dt = opt.integrator.dt;
   Workspace& w = state.work;
   elastic_forces(model, state.position, w.force);
   add_contact_forces(state, w.force);
   MotionSums sums;
   const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt, &sums};
-  for_each_acceleration(model, w.force.data(), state.velocity.data(), update);
-  sums.write(w);
-  state.indenter_velocity += dt * indenter_free_acceleration(model, state);
+  for_each_acceleration(model, opt, w.force.data(), state.velocity.data(), update);
+  sums.write(state.out);
+  state.indenter_velocity += dt * indenter_free_acceleration(opt, state);
   state.indenter_center[2] += dt * state.indenter_velocity;
 }
 
@@ -275,9 +276,9 @@ void for_each_coordinate(const Model& model, const Body& body) {
 
 // Ap = A p = (1 + dt c) M p + dt^2 K p over the free particles (zero on fixed ones);
 // returns p . Ap.
-double apply_step_operator(const Model& model, State& state, const Points& p, Points& Ap) {
-  const double dt = model.scene.integrator.dt;
-  const double mass_factor = 1.0 + dt * model.scene.integrator.damping;
+double apply_step_operator(const Model& model, const Options& opt, State& state, const Points& p, Points& Ap) {
+  const double dt = opt.integrator.dt;
+  const double mass_factor = 1.0 + dt * opt.integrator.damping;
   elastic_force_differential(model, state.work, p, Ap);  // -K p
   const double* P = p.data();
   double* AP = Ap.data();
@@ -294,16 +295,17 @@ double apply_step_operator(const Model& model, State& state, const Points& p, Po
 
 }  // namespace
 
-ImplicitEulerOperator::ImplicitEulerOperator(const Model& model, State& state) : model_(model), state_(state) {}
+ImplicitEulerOperator::ImplicitEulerOperator(const Model& model, const Options& opt, State& state)
+    : model_(model), opt_(opt), state_(state) {}
 
-void ImplicitEulerOperator::apply(const Points& p, Points& Ap) { apply_step_operator(model_, state_, p, Ap); }
+void ImplicitEulerOperator::apply(const Points& p, Points& Ap) { apply_step_operator(model_, opt_, state_, p, Ap); }
 
 int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x) {
   // Preconditioned CG with the Jacobi preconditioner of the mass part, z = r / ((1 + dt c) m),
   // in three passes per iteration: A p (with p . A p), then x, r and r . r, r . z, then p.
   Workspace& w = state_.work;
-  const double dt = model_.scene.integrator.dt;
-  const double inv_mass_factor = 1.0 / (1.0 + dt * model_.scene.integrator.damping);
+  const double dt = opt_.integrator.dt;
+  const double inv_mass_factor = 1.0 / (1.0 + dt * opt_.integrator.damping);
   const double* B = b.data();
   double* X = x.data();
   double* R = w.cg_r.data();
@@ -324,10 +326,10 @@ int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x) {
   const double b_norm = std::sqrt(r_r.total());
   if (b_norm == 0.0) return 0;
   double rz = r_z.total();
-  const double tolerance = model_.scene.integrator.cg_tolerance * b_norm;
-  const int max_iterations = model_.scene.integrator.cg_max_iterations;
+  const double tolerance = opt_.integrator.cg_tolerance * b_norm;
+  const int max_iterations = opt_.integrator.cg_max_iterations;
   for (int it = 1; it <= max_iterations; ++it) {
-    const double alpha = rz / apply_step_operator(model_, state_, w.cg_p, w.cg_Ap);
+    const double alpha = rz / apply_step_operator(model_, opt_, state_, w.cg_p, w.cg_Ap);
     Sum r_r_next, r_z_next;
     for_each_coordinate(model_, [&](int k, auto inv_m, auto) {
       using T = decltype(inv_m);
@@ -350,11 +352,11 @@ int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x) {
 
 void ImplicitEulerOperator::solve(const Points& load, Points& out) { conjugate_gradient(load, out); }
 
-void free_motion_implicit_euler(const Model& model, State& state) {
-  const double dt = model.scene.integrator.dt;
-  const double c = model.scene.integrator.damping;
+void free_motion_implicit_euler(const Model& model, const Options& opt, State& state) {
+  const double dt = opt.integrator.dt;
+  const double c = opt.integrator.damping;
   Workspace& w = state.work;
-  const Vec3 g = model.scene.gravity;
+  const Vec3 g = opt.gravity;
   linearize_elastic(model, state.position, w);
   elastic_forces(model, state.position, w.force);
   add_contact_forces(state, w.force);
@@ -363,11 +365,11 @@ void free_motion_implicit_euler(const Model& model, State& state) {
     const double m_i = model.mass[i];
     w.rhs.col(i) = dt * (w.force.col(i) + m_i * g - c * m_i * state.velocity.col(i)) + dt * dt * w.cg_Ap.col(i);
   }
-  ImplicitEulerOperator op(model, state);
-  state.cg_iterations = op.conjugate_gradient(w.rhs, w.dv);
+  ImplicitEulerOperator op(model, opt, state);
+  state.out.cg_iterations = op.conjugate_gradient(w.rhs, w.dv);
   state.velocity += w.dv;
   state.position += dt * state.velocity;
-  state.indenter_velocity += dt * indenter_free_acceleration(model, state);
+  state.indenter_velocity += dt * indenter_free_acceleration(opt, state);
   state.indenter_center[2] += dt * state.indenter_velocity;
 }
 

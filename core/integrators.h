@@ -3,6 +3,7 @@
 // the commanded indenter force); contact is projected afterwards by solve_contact.
 #include "core/contact.h"
 #include "core/model.h"
+#include "core/options.h"
 #include "core/state.h"
 
 namespace palpate {
@@ -17,22 +18,22 @@ void add_contact_forces(const State& state, Points& force);
 
 // a = M^-1 (f_int(x) + f_contact + m g) - c v for the particles (zero for fixed
 // ones); writes 3 x n. f_contact from state's previous contact forces.
-void particle_accelerations(const Model& model, const State& state, const Points& x, const Points& v,
-                            Points& force_scratch, Points& acceleration);
+void particle_accelerations(const Model& model, const Options& opt, const State& state, const Points& x,
+                            const Points& v, Points& force_scratch, Points& acceleration);
 
 // Indenter acceleration along z: (F_contact,previous - F_command) / M + g_z.
-double indenter_free_acceleration(const Model& model, const State& state);
+double indenter_free_acceleration(const Options& opt, const State& state);
 
 // Classical fourth-order Runge-Kutta on (x, v) (the paper's integrator).
-void free_motion_rk4(const Model& model, State& state);
+void free_motion_rk4(const Model& model, const Options& opt, State& state);
 // Symplectic (semi-implicit) Euler: v += dt a(x, v); x += dt v.
-void free_motion_symplectic_euler(const Model& model, State& state);
+void free_motion_symplectic_euler(const Model& model, const Options& opt, State& state);
 // The step operator of linearly implicit Euler, A = (1 + dt c) M + dt^2 K over the
-// free particles, K the tangent stiffness cached in state.work by linearize_forces.
+// free particles, K the tangent stiffness cached in state.work by mls_linearize.
 // It is also the coupled response of the contact solve of that step.
 class ImplicitEulerOperator final : public LinearResponse {
  public:
-  ImplicitEulerOperator(const Model& model, State& state);
+  ImplicitEulerOperator(const Model& model, const Options& opt, State& state);
   void apply(const Points& p, Points& Ap);
   // Jacobi-preconditioned CG for A x = b; iterations used, -1 if not converged.
   int conjugate_gradient(const Points& b, Points& x);
@@ -40,11 +41,12 @@ class ImplicitEulerOperator final : public LinearResponse {
 
  private:
   const Model& model_;
+  const Options& opt_;
   State& state_;
 };
 
 // Linearly implicit Euler (one Newton step, Baraff-Witkin form):
 // [(1 + dt c) M + dt^2 K] dv = dt (f + M g - c M v) - dt^2 K v;  v += dv; x += dt v.
-void free_motion_implicit_euler(const Model& model, State& state);
+void free_motion_implicit_euler(const Model& model, const Options& opt, State& state);
 
 }  // namespace palpate

@@ -1,5 +1,7 @@
 #include "core/mls_forces.h"
 
+#include <cassert>
+
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
@@ -201,7 +203,7 @@ inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, con
   return dP;
 }
 
-// internal_forces one particle at a time (with hourglass control).
+// mls_internal_forces one particle at a time (with hourglass control).
 void internal_forces_per_particle(const Model& m, const double* x, double* f) {
   const double* D = m.gradient_weight.data();
   const int* idx = m.neighbor_index.data();
@@ -233,14 +235,14 @@ void internal_forces_per_particle(const Model& m, const double* x, double* f) {
   }
 }
 
-// force_differential one particle at a time (with hourglass control).
-void force_differential_per_particle(const Model& m, const double* cached_F, const double* cached_S,
+// mls_force_differential one particle at a time (with hourglass control).
+void force_differential_per_particle(const Model& m, const double* tangent_F, const double* tangent_S_or_R,
                                      const double* dx, double* df) {
   const double* D = m.gradient_weight.data();
   const int* idx = m.neighbor_index.data();
   for (int i = 0; i < m.particle_count; ++i) {
-    const Eigen::Map<const Mat3> F(cached_F + 9 * static_cast<size_t>(i));
-    const Eigen::Map<const Mat3> S(cached_S + 9 * static_cast<size_t>(i));
+    const Eigen::Map<const Mat3> F(tangent_F + 9 * static_cast<size_t>(i));
+    const Eigen::Map<const Mat3> S(tangent_S_or_R + 9 * static_cast<size_t>(i));
     // dF = sum_j (dx_j - dx_i) d_j^T (the rest correction is constant).
     Mat3 dF = Mat3::Zero();
     const Vec3 dxi = Eigen::Map<const Vec3>(dx + 3 * i);
@@ -571,7 +573,7 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
 }
 
 template <bool volume_term>
-void force_differential_blocked(const Model& m, const double* cached_F, const double* cached_S,
+void force_differential_blocked(const Model& m, const double* tangent_F, const double* tangent_S_or_R,
                                 const double* __restrict dx, double* __restrict df) {
   const int n = m.particle_count;
   for (int b = 0; b < static_cast<int>(m.blocks.size()); ++b) {
@@ -583,8 +585,8 @@ void force_differential_blocked(const Model& m, const double* cached_F, const do
     Mat3Lanes dF = {};  // dF = sum_j (dx_j - dx_i) d_j^T (the rest correction is constant)
     add_gradient(begin, end, dx, i, dF);
     Mat3Lanes F, S, vdP;
-    gather_matrices(cached_F, i, F);
-    gather_matrices(cached_S, i, S);
+    gather_matrices(tangent_F, i, F);
+    gather_matrices(tangent_S_or_R, i, S);
     if (m.law != MaterialLaw::stvk)  // S holds R for the corotational law
       weighted_differential_per_lane(m, F, S, dF, load(block.volume), vdP);
     else
@@ -607,7 +609,8 @@ Mat3 deformation_gradient(const Model& model, const Points& x, int i) { return g
 
 double first_piola_stress(const Model& model, const Mat3& F, Mat3& P) { return piola_stress(model, F, P); }
 
-void internal_forces(const Model& m, const Points& x, Points& f) {
+void mls_internal_forces(const Model& m, const Points& x, Points& f) {
+  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   f.setZero();
   if (!use_blocks(m))
     internal_forces_per_particle(m, x.data(), f.data());
@@ -617,7 +620,8 @@ void internal_forces(const Model& m, const Points& x, Points& f) {
     internal_forces_blocked<false>(m, x.data(), f.data());
 }
 
-double strain_energy(const Model& m, const Points& x) {
+double mls_strain_energy(const Model& m, const Points& x) {
+  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   double U = 0;
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
@@ -631,32 +635,34 @@ double strain_energy(const Model& m, const Points& x) {
   return U;
 }
 
-void linearize_forces(const Model& m, const Points& x, std::vector<double>& cached_F,
-                      std::vector<double>& cached_S) {
-  cached_F.resize(9 * static_cast<size_t>(m.particle_count));
-  cached_S.resize(9 * static_cast<size_t>(m.particle_count));
+void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent_F,
+                      std::vector<double>& tangent_S_or_R) {
+  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
+  tangent_F.resize(9 * static_cast<size_t>(m.particle_count));
+  tangent_S_or_R.resize(9 * static_cast<size_t>(m.particle_count));
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
     Mat3 P, S;
     piola_stress(m, F, P, &S);  // S, or R for the corotational law
-    Eigen::Map<Mat3> F_out(&cached_F[9 * static_cast<size_t>(i)]), S_out(&cached_S[9 * static_cast<size_t>(i)]);
+    Eigen::Map<Mat3> F_out(&tangent_F[9 * static_cast<size_t>(i)]), S_out(&tangent_S_or_R[9 * static_cast<size_t>(i)]);
     F_out = F;
     S_out = S;
   }
 }
 
-void force_differential(const Model& m, const std::vector<double>& cached_F,
-                        const std::vector<double>& cached_S, const Points& dx, Points& df) {
+void mls_force_differential(const Model& m, const std::vector<double>& tangent_F,
+                        const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df) {
+  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   df.setZero();
   if (!use_blocks(m))
-    force_differential_per_particle(m, cached_F.data(), cached_S.data(), dx.data(), df.data());
+    force_differential_per_particle(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
   else if (m.volume_stiffness > 0)
-    force_differential_blocked<true>(m, cached_F.data(), cached_S.data(), dx.data(), df.data());
+    force_differential_blocked<true>(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
   else
-    force_differential_blocked<false>(m, cached_F.data(), cached_S.data(), dx.data(), df.data());
+    force_differential_blocked<false>(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
 }
 
-double internal_forces_flops(const Model& m) {
+double mls_internal_forces_flops(const Model& m) {
   // Floating-point operations (an FMA counts two) of the arithmetic the force loop
   // needs, as the code does it; padding slots and lanes of the blocked loop are not counted.
   const double nnz = m.neighbor_offset.back(), n = m.particle_count;

@@ -2,7 +2,7 @@
 // Internal forces of the MLS solid with nodal integration (Müller et al. 2004,
 // Aras et al.): deformation gradient, Green strain, St Venant-Kirchhoff stress,
 // energy-consistent forces, the optional volume-restoring term and the optional
-// hourglass control. Forces are the exact negative gradient of strain_energy().
+// hourglass control. Forces are the exact negative gradient of mls_strain_energy().
 #include <vector>
 
 #include "core/model.h"
@@ -10,11 +10,14 @@
 
 namespace palpate {
 
+// Every function here is for an MLS model (model.solid == SolidKind::mls; asserted):
+// a hex-FEM model has no support domains. solid.h dispatches on the model.
+
 // f (3 x n, overwritten) = -dU/dx at positions x (3 x n).
-void internal_forces(const Model& model, const Points& x, Points& f);
+void mls_internal_forces(const Model& model, const Points& x, Points& f);
 
 // U(x) = sum_i v_i [ 1/2 E:S + k_v/2 (det F - 1)^2 ] + hourglass energy, J.
-double strain_energy(const Model& model, const Points& x);
+double mls_strain_energy(const Model& model, const Points& x);
 
 // Deformation gradient of particle i: F_i = sum_j (x_j - x_i) d_j^T + C_i.
 Mat3 deformation_gradient(const Model& model, const Points& x, int i);
@@ -23,15 +26,15 @@ Mat3 deformation_gradient(const Model& model, const Points& x, int i);
 // for deformation gradient F; returns the energy density psi, J/m^3.
 double first_piola_stress(const Model& model, const Mat3& F, Mat3& P);
 
-// Tangent stiffness, matrix-free. linearize_forces caches F_i and S_i (9 x n
-// each) at x; force_differential then gives df = (df/dx) dx = -K dx.
-void linearize_forces(const Model& model, const Points& x, std::vector<double>& cached_F,
-                      std::vector<double>& cached_S);
-void force_differential(const Model& model, const std::vector<double>& cached_F,
-                        const std::vector<double>& cached_S, const Points& dx, Points& df);
+// Tangent stiffness, matrix-free. mls_linearize caches F_i and S_i (9 x n
+// each) at x; mls_force_differential then gives df = (df/dx) dx = -K dx.
+void mls_linearize(const Model& model, const Points& x, std::vector<double>& tangent_F,
+                      std::vector<double>& tangent_S_or_R);
+void mls_force_differential(const Model& model, const std::vector<double>& tangent_F,
+                        const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df);
 
-// Floating-point operations of one internal_forces call (for the benchmark's GFLOP/s),
+// Floating-point operations of one mls_internal_forces call (for the benchmark's GFLOP/s),
 // as the St Venant-Kirchhoff law does them.
-double internal_forces_flops(const Model& model);
+double mls_internal_forces_flops(const Model& model);
 
 }  // namespace palpate

@@ -3,6 +3,7 @@
 // from it. Built once from a Scene (build_model); never changed by a step.
 // Shapes: n = particle_count, nnz = total number of weighted neighbours.
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/hex_fem.h"
@@ -12,10 +13,16 @@
 namespace palpate {
 
 enum class SolidKind { mls, hex_fem };
+// The scene's name of the model: "mls" or "hex_fem".
+inline const char* to_string(SolidKind s) { return s == SolidKind::mls ? "mls" : "hex_fem"; }
 
 struct Model {
-  Scene scene;  // the description this model was built from
+  // What it was built from (the Scene itself stays the caller's: options_of(scene) gives
+  // the step options, and nothing here may be edited to change them).
+  std::string name;    // the scene's name
+  std::string source;  // the scene's file (or "<rpc scene>"), for messages
   SolidKind solid = SolidKind::mls;  // which elastic model the particles (nodes) belong to
+  DistributionType distribution = DistributionType::grid;  // how the particles were placed
 
   int particle_count = 0;
   Points rest_position;  // 3 x n, X_i, m
@@ -34,6 +41,7 @@ struct Model {
   std::vector<double> volume;            // n, v_i, m^3
   std::vector<uint8_t> fixed;            // n, 1 = fixed particle
   int fixed_count = 0;
+  double free_mass = 0.0;                // sum of m_i over the free particles, kg
 
   // Blocked copy of the support domains for the vectorised force loop (mls_forces.cpp).
   // Particles 4b ... 4b+3 form block b (lanes 0..3; lanes >= n of the last block are
@@ -54,23 +62,24 @@ struct Model {
   std::vector<ParticleBlock> blocks;      // ceil(n / 4)
   std::vector<NeighborSlot> block_slots;  // sum over blocks of the longest neighbour list
 
-  // Hourglass control (empty when scene.mls.hourglass == 0).
+  // Hourglass control (empty when the scene's mls.hourglass == 0).
   std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
   Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)
 
   // Hexahedral FEM (solid == hex_fem only; particles are the lattice nodes).
   HexMesh hex;
 
-  // Material.
+  // Material: the only copy (the scene's material section is not kept).
   double lame_lambda = 0.0;       // Pa
   double lame_mu = 0.0;           // Pa
+  double density = 0.0;           // rho, kg/m^3
   double volume_stiffness = 0.0;  // k_v, Pa
   MaterialLaw law = MaterialLaw::stvk;  // MLS material law (scene material.law)
 
-  // Indenter.
+  // Indenter (its mass is an option: Options::indenter_mass).
   double indenter_radius = 0.0;   // m
-  double indenter_mass = 0.0;     // kg
   Vec3 indenter_start{0, 0, 0};   // initial centre, m
+  double initial_force_command = 0.0;  // N, the scene's indenter.force: State::force_command at rest
   double touch_height = 0.0;      // z of the centre when the sphere touches the undeformed surface
                                   // (the highest particle under it) with its lowest point, m
 
@@ -93,7 +102,8 @@ struct Model {
 };
 
 // Builds the model a scene describes. Throws SceneError / std::runtime_error
-// with an actionable message on a scene that cannot be built.
+// with an actionable message on a scene that cannot be built, or whose options
+// (options_of(scene)) the model cannot run (check_options, time_step.h).
 Model build_model(const Scene& scene);
 
 }  // namespace palpate

@@ -9,26 +9,26 @@ void elastic_forces(const Model& model, const Points& x, Points& f) {
   if (model.solid == SolidKind::hex_fem)
     hex_internal_forces(model.hex, model.rest_position, x, f);
   else
-    internal_forces(model, x, f);
+    mls_internal_forces(model, x, f);
 }
 
 double elastic_energy(const Model& model, const Points& x) {
   return model.solid == SolidKind::hex_fem ? hex_strain_energy(model.hex, model.rest_position, x)
-                                           : strain_energy(model, x);
+                                           : mls_strain_energy(model, x);
 }
 
 void linearize_elastic(const Model& model, const Points& x, Workspace& work) {
   if (model.solid == SolidKind::hex_fem)
-    hex_linearize(model.hex, x, work.cached_F);  // element rotations
+    hex_linearize(model.hex, x, work.tangent_F);  // element rotations (hex FEM)
   else
-    linearize_forces(model, x, work.cached_F, work.cached_S);
+    mls_linearize(model, x, work.tangent_F, work.tangent_S_or_R);
 }
 
 void elastic_force_differential(const Model& model, const Workspace& work, const Points& dx, Points& df) {
   if (model.solid == SolidKind::hex_fem)
-    hex_force_differential(model.hex, work.cached_F, dx, df);
+    hex_force_differential(model.hex, work.tangent_F, dx, df);
   else
-    force_differential(model, work.cached_F, work.cached_S, dx, df);
+    mls_force_differential(model, work.tangent_F, work.tangent_S_or_R, dx, df);
 }
 
 }  // namespace palpate

@@ -1,42 +1,25 @@
 #pragma once
-// The mutable State: everything a step changes, plus preallocated scratch so a
-// step allocates nothing. make_state() gives the rest state of a Model.
+// The mutable State of one simulation, in three parts:
+//  - CarriedState: what one step hands to the next, and so what a Checkpoint copies
+//    (positions, velocities, the indenter, the command, the contact set, the clock and
+//    the health bookkeeping);
+//  - StepOutputs: what a stage writes during a step for later stages and for the
+//    caller (solver counts, the contact candidates, the sums the health checks read);
+//    never needed by the next step;
+//  - Workspace: scratch, preallocated so a step allocates nothing; never read across
+//    stages or steps except as documented at the field.
+// make_state() sizes all three from the Model alone, for every integrator, so a
+// caller may switch Options::integrator between steps.
 #include <cstdint>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "core/model.h"
+#include "core/options.h"
 #include "core/types.h"
 
 namespace palpate {
-
-// Scratch memory owned by the state (never read across steps).
-struct Workspace {
-  Points force;                        // 3 x n
-  Points rk_x[4], rk_v[4];             // RK4 stage slopes
-  Points x0, v0;                       // start-of-step copies
-  // Written by the explicit free-motion stages for the health checks (health.h):
-  // 1/2 sum m v^2 of the body and sum of all coordinates after the update (before contact).
-  double free_motion_kinetic = 0.0, free_motion_position_sum = 0.0;
-  bool free_motion_sums_valid = false;
-  // Implicit Euler (allocated only for that integrator)
-  Points cg_r, cg_p, cg_z, cg_Ap, rhs, dv;
-  std::vector<double> cached_F, cached_S;  // 9 x n each: linearisation point of the tangent stiffness
-  Points contact_response;             // 3 x (n * m): A^-1 J^T columns of the implicit contact compliance
-  // Contact
-  std::vector<int> candidate;          // particles with negative free gap or in contact before
-  std::vector<int> candidate_slot;     // n, candidate slot of each particle, -1 if none
-  std::vector<double> previous_multiplier;  // m, previous contact force along this step's normal
-  Points previous_force;               // 3 x n capacity, previous contact force vectors
-  std::vector<double> gap;             // free gaps, m
-  Points normal;                       // 3 x n capacity, unit normals from the sphere centre
-  std::vector<double> delassus;        // m x m, row-major
-  std::vector<double> multiplier;      // m
-  std::vector<double> solve_buffer;    // scratch of the active-set solve
-  std::vector<int> active;             // active-set membership (0/1 per candidate)
-  std::vector<int> members;            // indices of the active candidates
-};
 
 // What a step reports (health.h describes the checks behind each).
 enum class StepStatus {
@@ -62,7 +45,8 @@ struct HealthReport {
   double limit = 0.0;  // its limit
 };
 
-// The health limits in force (the scene's "health" fields, or derived from the model).
+// The health limits in force: Options::health, or derived from the model and the
+// options where a limit is 0 (health_limits(), health.h).
 struct HealthLimits {
   double energy_factor = 0.0;
   double energy_floor = 0.0;        // J
@@ -73,7 +57,6 @@ struct HealthLimits {
 
 // Health-check bookkeeping carried from step to step (health.h).
 struct HealthMonitor {
-  HealthLimits limits;            // set by reset_health()
   double energy_input = 0.0;      // J: initial energy + work of the command and gravity so far
   double energy_budget = 0.0;     // J: the running maximum of energy_input
   double kinetic_energy = 0.0;    // J, body + indenter, at the last check
@@ -84,7 +67,9 @@ struct HealthMonitor {
   HealthReport report;            // the last failure
 };
 
-struct State {
+// Everything one step hands to the next. Copying it (Checkpoint) saves the state; the
+// vectors keep their capacity, so a copy into a State of the same model allocates nothing.
+struct CarriedState {
   Points position;  // 3 x n, x_i, m
   Points velocity;  // 3 x n, m/s
 
@@ -92,23 +77,69 @@ struct State {
   double indenter_velocity = 0.0; // m/s along z
   double force_command = 0.0;     // N pressing the indenter down (-z); the real-time input
 
-  // Contact, written by the contact stage each step.
-  std::vector<int> contact_index;      // particles in contact (multiplier > 0)
-  std::vector<double> contact_multiplier;  // lambda_i >= 0, N (normal force magnitude)
-  Points contact_force;                // 3 x (contact count capacity n): force on particle, N
-  double indenter_contact_force = 0.0; // z force of the body on the indenter, N (positive up)
-  int contact_iterations = 0;          // pivots of the last contact solve
-  double contact_max_penetration = 0.0;  // m, after the solve (linearised)
+  // The contact set of the last step (contact stage). The free motion of the next step
+  // carries these forces as external forces (integrators.h).
+  std::vector<int> contact_index;          // particles in contact (normal force > 0)
+  std::vector<double> contact_normal_force;  // mu_i >= 0, N: the velocity-level multiplier of
+                                             // particle contact_index[c] (momentum / dt, physics.md §2)
+  Points contact_force;                    // 3 x (capacity n): force on particle contact_index[c], N
+  double indenter_contact_force = 0.0;     // z force of the body on the indenter, N (positive up)
 
   double time = 0.0;  // s
   int64_t tick = 0;
-  int cg_iterations = 0;  // implicit Euler, last step (free motion solve)
 
   HealthMonitor health;
+};
 
+// Written by a stage during a step, read by later stages of the same step or by the
+// caller after it; the next step overwrites them.
+struct StepOutputs {
+  // Free motion (integrators.h).
+  int cg_iterations = 0;  // implicit Euler: CG iterations of the free-motion solve
+  // 1/2 sum m v^2 of the body and the sum of all coordinates, taken by the explicit
+  // integrators' update pass (before contact) for the health checks; valid flags it.
+  double free_motion_kinetic = 0.0, free_motion_position_sum = 0.0;
+  bool free_motion_sums_valid = false;
+  // Contact (contact.h).
+  std::vector<int> contact_candidate;  // particles with negative free gap or in contact before
+  int contact_iterations = 0;          // pivots of the contact solve
+  double contact_max_penetration = 0.0;  // m, after the solve (linearised)
+};
+
+// Scratch memory owned by the state.
+struct Workspace {
+  Points force;                        // 3 x n
+  Points rk_x[4], rk_v[4];             // RK4 stage slopes (symplectic Euler uses rk_v[0])
+  Points x0, v0;                       // start-of-step copies
+  // Implicit Euler
+  Points cg_r, cg_p, cg_z, cg_Ap, rhs, dv;
+  // The linearisation point of the tangent stiffness, written by the free motion and
+  // read by the contact response of the same step (solid.h), 9 x n each (column-major
+  // 3 x 3 per particle): the deformation gradient F_i (hex FEM: the element rotations)
+  // and the law's second factor, S_i (St Venant-Kirchhoff, linear) or R_i (corotational).
+  std::vector<double> tangent_F, tangent_S_or_R;
+  Points contact_response;             // 3 x (n * m): A^-1 J^T columns of the implicit contact compliance
+  // Contact
+  std::vector<int> candidate_slot;     // n, candidate slot of each particle, -1 if none
+  std::vector<double> previous_multiplier;  // m, previous contact force along this step's normal
+  Points previous_force;               // 3 x n capacity, previous contact force vectors
+  std::vector<double> gap;             // free gaps, m
+  Points normal;                       // 3 x n capacity, unit normals from the sphere centre
+  std::vector<double> delassus;        // m x m, row-major
+  std::vector<double> multiplier;      // m
+  std::vector<double> solve_buffer;    // scratch of the active-set solve
+  std::vector<int> active;             // active-set membership (0/1 per candidate)
+  std::vector<int> members;            // indices of the active candidates
+};
+
+struct State : CarriedState {
+  StepOutputs out;
   Workspace work;
 };
 
-State make_state(const Model& model);
+// The rest state of a model (positions at rest, the indenter at its start, the scene's
+// initial force command), all memory sized for every integrator; the health budget
+// starts from it under `opt` (its gravity).
+State make_state(const Model& model, const Options& opt);
 
 }  // namespace palpate

@@ -8,27 +8,27 @@
 
 namespace palpate {
 
-StepStatus step(const Model& model, State& state) {
+StepStatus step(const Model& model, const Options& opt, State& state) {
   StepStatus status = StepStatus::ok;
-  switch (model.scene.integrator.type) {
+  switch (opt.integrator.type) {
     case IntegratorType::rk4:
-      free_motion_rk4(model, state);
-      status = solve_contact(model, state);
+      free_motion_rk4(model, opt, state);
+      status = solve_contact(model, opt, state);
       break;
     case IntegratorType::symplectic_euler:
-      free_motion_symplectic_euler(model, state);
-      status = solve_contact(model, state);
+      free_motion_symplectic_euler(model, opt, state);
+      status = solve_contact(model, opt, state);
       break;
     case IntegratorType::implicit_euler: {
-      free_motion_implicit_euler(model, state);
-      ImplicitEulerOperator response(model, state);  // A, for the coupled contact response
-      status = solve_contact(model, state, &response);
+      free_motion_implicit_euler(model, opt, state);
+      ImplicitEulerOperator response(model, opt, state);  // A, for the coupled contact response
+      status = solve_contact(model, opt, state, &response);
       break;
     }
   }
-  state.time += model.scene.integrator.dt;
+  state.time += opt.integrator.dt;
   ++state.tick;
-  if (model.scene.health.enabled) return check_health(model, state, status);
+  if (opt.health.enabled) return check_health(model, opt, state, status);
   // Checks off: only finiteness (a NaN or Inf anywhere in the positions makes their sum non-finite).
   if (!std::isfinite(state.position.sum() + state.indenter_center[2] + state.indenter_velocity))
     return StepStatus::non_finite;

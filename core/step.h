@@ -1,15 +1,16 @@
 #pragma once
-// One simulation tick, in stage order: free motion by the scene's integrator
+// One simulation tick, in stage order: free motion by the options' integrator
 // (elastic forces, damping, gravity, commanded indenter force) -> contact solve
-// and correction -> time bookkeeping -> finiteness check.
+// and correction -> time bookkeeping -> health checks (or finiteness alone).
 #include "core/model.h"
+#include "core/options.h"
 #include "core/state.h"
 
 namespace palpate {
 
-// Advances the state by the scene's dt. The caller sets state.force_command
-// (the real-time input) before the call.
-StepStatus step(const Model& model, State& state);
+// Advances the state by opt.integrator.dt. The caller sets state.force_command
+// (the real-time input) before the call; opt may differ from step to step.
+StepStatus step(const Model& model, const Options& opt, State& state);
 
 const char* to_string(StepStatus);
 

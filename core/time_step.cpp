@@ -33,31 +33,31 @@ namespace {
 
 // c_p with the volume term: sqrt((lambda + 2 mu + k_v) / rho), m/s.
 double envelope_wave_speed(const Model& model) {
-  return std::sqrt((model.lame_lambda + 2 * model.lame_mu + model.volume_stiffness) / model.scene.material.density);
+  return std::sqrt((model.lame_lambda + 2 * model.lame_mu + model.volume_stiffness) / model.density);
 }
 
-double envelope_constant(const Model& model) {
-  return stability_constant(model.solid, model.scene.integrator.type, model.scene.distribution.type);
+double envelope_constant(const Model& model, IntegratorType integrator) {
+  return stability_constant(model.solid, integrator, model.distribution);
 }
 
 }  // namespace
 
-double stable_time_step(const Model& model) {
-  return envelope_constant(model) * model.min_spacing / envelope_wave_speed(model);
+double stable_time_step(const Model& model, IntegratorType integrator) {
+  return envelope_constant(model, integrator) * model.min_spacing / envelope_wave_speed(model);
 }
 
-void check_time_step(const Model& model) {
-  const IntegratorSpec& in = model.scene.integrator;
-  const double dt_max = stable_time_step(model);
+void check_options(const Model& model, const Options& opt) {
+  const IntegratorSpec& in = opt.integrator;
+  const double dt_max = stable_time_step(model, in.type);
   if (in.allow_unstable_dt || in.dt <= dt_max) return;
   char text[512];
   std::snprintf(text, sizeof text,
                 "%g s is outside the measured stable envelope of %s with the %s model: dt <= c dx_min / c_p = "
                 "%.3g x %.4g m / %.4g m/s = %.4g s (docs/stability.md). Use a smaller dt, or set "
                 "integrator.allow_unstable_dt to true to run anyway",
-                in.dt, to_string(in.type), model.scene.model.c_str(), envelope_constant(model), model.min_spacing,
+                in.dt, to_string(in.type), to_string(model.solid), envelope_constant(model, in.type), model.min_spacing,
                 envelope_wave_speed(model), dt_max);
-  throw SceneError(model.scene.source, "/integrator/dt", text);
+  throw SceneError(model.source, "/integrator/dt", text);
 }
 
 }  // namespace palpate

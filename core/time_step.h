@@ -8,6 +8,7 @@
 // smaller of the two), so a scene inside it is inside the measured envelope.
 // Implicit Euler has a limit too (time_step.cpp says why).
 #include "core/model.h"
+#include "core/options.h"
 #include "core/scene.h"
 
 namespace palpate {
@@ -15,11 +16,13 @@ namespace palpate {
 // c of the envelope.
 double stability_constant(SolidKind solid, IntegratorType integrator, DistributionType distribution);
 
-// dt_max of the model's integrator, s.
-double stable_time_step(const Model& model);
+// dt_max of the model with `integrator`, s.
+double stable_time_step(const Model& model, IntegratorType integrator);
 
-// Throws SceneError on /integrator/dt when dt > stable_time_step(model), naming the
-// envelope, unless the scene sets integrator.allow_unstable_dt.
-void check_time_step(const Model& model);
+// Checks options against the model before they are used: throws SceneError (source:
+// the model's scene, field /integrator/dt) when opt.integrator.dt > stable_time_step,
+// naming the envelope, unless opt.integrator.allow_unstable_dt. build_model runs it on
+// the scene's options; a caller that changes the options runs it again.
+void check_options(const Model& model, const Options& opt);
 
 }  // namespace palpate

@@ -115,7 +115,7 @@ class SessionImpl final : public wire::Session::Server {
 
   void fill_info(wire::SessionInfo::Builder info) {
     const Model& m = sim_->model();
-    const Scene& s = m.scene;
+    const Scene& s = sim_->config().scene;
     info.setSceneName(s.name);
     info.setParticleCount(static_cast<uint32_t>(m.particle_count));
     info.setDt(s.integrator.dt);
@@ -137,7 +137,7 @@ class SessionImpl final : public wire::Session::Server {
 
   kj::Promise<void> setForce(SetForceContext context) override {
     const double f = context.getParams().getNewtons();
-    check_force(f, force_limit(sim_->model().scene));
+    check_force(f, force_limit(sim_->config().scene));
     auto results = context.getResults();
     results.setSeq(sim_->enqueue(CommandType::set_force, f));
     results.setQueuedAtTick(sim_->newest_tick());

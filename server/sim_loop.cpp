@@ -42,11 +42,14 @@ inline void cpu_relax() {
 }
 
 // A finite state that is already running away: a particle or the indenter more
-// than 10 box diagonals from its reference (such values would also overflow the
-// Float32 positions on the wire). One pass over 3 n doubles, no allocation.
-bool diverged(const Model& model, const State& state) {
-  const Vec3 diagonal = model.scene.box.max - model.scene.box.min;
-  const double bound = 10.0 * diagonal.norm();
+// than 10 diagonals of the body's bounding box from its reference (such values would
+// also overflow the Float32 positions on the wire). One pass over 3 n doubles, no
+// allocation.
+double divergence_bound(const Model& model) {
+  const Vec3 diagonal = model.rest_position.rowwise().maxCoeff() - model.rest_position.rowwise().minCoeff();
+  return 10.0 * diagonal.norm();
+}
+bool diverged(const Model& model, const State& state, double bound) {
   const double worst = (state.position - model.rest_position).cwiseAbs().maxCoeff();
   const double indenter = std::abs(state.indenter_center[2] - model.indenter_start[2]);
   return !(worst <= bound) || !(indenter <= bound);
@@ -187,7 +190,9 @@ void Simulation::run() {
   try {
     const int64_t t0 = now_ns();
     model_ = std::make_unique<Model>(build_model(config_.scene));
-    state_ = std::make_unique<State>(make_state(*model_));
+    options_ = options_of(config_.scene);
+    state_ = std::make_unique<State>(make_state(*model_, options_));
+    divergence_bound_ = divergence_bound(*model_);
     rest_ = std::make_unique<Checkpoint>(*state_);
     checkpoint_ = std::make_unique<Checkpoint>(*state_);
     for (int i = 0; i < 3; ++i) frames_.slot(i).reserve(model_->particle_count);
@@ -285,7 +290,7 @@ bool Simulation::tick_once() {
         checkpoint_->save(state);
         state.time = 0.0;
         state.tick = 0;
-        state.force_command = model.scene.indenter.force;
+        state.force_command = model.initial_force_command;
         ticks_since_recovery_ = -1;
         break;
       }
@@ -304,7 +309,7 @@ bool Simulation::tick_once() {
   }
 
   const int64_t t0 = now_ns();
-  const StepStatus status = step(model, state);
+  const StepStatus status = step(model, options_, state);
   const int64_t t1 = now_ns();
   step_us_.add((t1 - t0) * 1e-3);
   stepping_ns_.fetch_add(t1 - t0, std::memory_order_relaxed);
@@ -313,7 +318,7 @@ bool Simulation::tick_once() {
 
   // A failed health check (health.h) or a state gone far away: back to the last good state.
   if (is_fault(status)) recover(describe(state.health.report));
-  else if (diverged(model, state)) recover("diverged state (displacement beyond 10 box diagonals)");
+  else if (diverged(model, state, divergence_bound_)) recover("diverged state (displacement beyond 10 box diagonals)");
   else if (config_.checkpoint_interval > 0 && state.tick % config_.checkpoint_interval == 0) checkpoint_->save(state);
   return true;
 }
@@ -331,7 +336,7 @@ void Simulation::recover(const std::string& what) {
   if (again) {
     rest_->restore(state);
     checkpoint_->save(state);
-    state.force_command = model.scene.indenter.force;
+    state.force_command = model.initial_force_command;
     how = "restored the rest state and the scene's initial force (" + std::to_string(state.force_command) +
           " N; the command was " + std::to_string(command) + " N)";
   } else {

@@ -19,6 +19,7 @@
 
 #include "core/checkpoint.h"
 #include "core/model.h"
+#include "core/options.h"
 #include "core/scene.h"
 #include "core/state.h"
 #include "server/snapshot.h"
@@ -135,7 +136,9 @@ class Simulation {
   SimConfig config_;
   int wake_fd_ = -1;
   std::unique_ptr<Model> model_;
+  Options options_;  // the scene's (options_of); the loop steps with them
   std::unique_ptr<State> state_;
+  double divergence_bound_ = 0.0;  // m, see diverged() in sim_loop.cpp
   std::unique_ptr<Checkpoint> rest_, checkpoint_;
   double build_seconds_ = 0.0;
 

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 
+#include "analysis/rest.h"
 #include "core/contact.h"
 #include "core/indentation.h"
 #include "core/solid.h"
@@ -62,22 +63,24 @@ double min_gap(const Model& m, const State& s) {
 
 void press_release(const std::string& integrator, double dt, const std::string& model = "mls") {
   SCOPED_TRACE(integrator + " " + model);
-  const Model m = test::model_from_json(pressed_block(integrator, dt, model));
-  State s = make_state(m);
+  const test::Setup setup = test::setup_from_json(pressed_block(integrator, dt, model));
+  const Model& m = setup.model;
+  const Options& opt = setup.opt;
+  State s = make_state(m, opt);
   const double force = 20.0;
   s.force_command = force;
-  RestMonitor rest(m.scene.verify.rest);
+  RestMonitor rest(setup.scene.verify.rest);
   bool at_rest = false;
   int steps = 0;
   size_t most_contacts = 0;
   for (; steps < static_cast<int>(20.0 / dt) && !at_rest; ++steps) {
-    ASSERT_EQ(step(m, s), StepStatus::ok) << "step " << steps;
-    for (double lambda : s.contact_multiplier) ASSERT_GT(lambda, 0.0);
+    ASSERT_EQ(step(m, opt, s), StepStatus::ok) << "step " << steps;
+    for (double lambda : s.contact_normal_force) ASSERT_GT(lambda, 0.0);
     most_contacts = std::max(most_contacts, s.contact_index.size());
     // Signorini: no penetration beyond the solver tolerance plus the second-order
     // error of the linearised sphere motion.
     ASSERT_GT(min_gap(m, s), -1e-5) << "step " << steps;
-    at_rest = rest.update(m, s);
+    at_rest = rest.update(s, opt.integrator.dt);
   }
   ASSERT_TRUE(at_rest) << "no rest after " << steps << " steps";
   EXPECT_GT(most_contacts, 0u);
@@ -108,7 +111,7 @@ void press_release(const std::string& integrator, double dt, const std::string& 
 
   // Unilateral: pulling the indenter up releases the contact, no force sticks.
   s.force_command = -5.0;
-  for (int k = 0; k < static_cast<int>(1.0 / dt); ++k) ASSERT_EQ(step(m, s), StepStatus::ok);
+  for (int k = 0; k < static_cast<int>(1.0 / dt); ++k) ASSERT_EQ(step(m, opt, s), StepStatus::ok);
   EXPECT_TRUE(s.contact_index.empty());
   EXPECT_EQ(s.indenter_contact_force, 0.0);
   EXPECT_GT(min_gap(m, s), 0.0);

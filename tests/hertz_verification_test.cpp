@@ -19,10 +19,12 @@
 #include <string>
 #include <vector>
 
+#include "analysis/rest.h"
+#include "test_util.h"
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/model.h"
-#include "core/reference.h"
+#include "analysis/reference.h"
 #include "core/scene.h"
 #include "core/state.h"
 
@@ -33,11 +35,13 @@ const std::string kScene = std::string(PALPATE_SOURCE_DIR) + "/scenes/hertz_cube
 
 // Rest indentations for a force sweep at `per_edge` particles per edge.
 std::vector<double> sweep(int per_edge, const std::vector<double>& forces) {
-  const Model model = build_model(load_scene(kScene, {{"body.distribution.per_edge", std::to_string(per_edge)}}));
-  State state = make_state(model);
+  const test::Setup setup = test::setup_from(load_scene(kScene, {{"body.distribution.per_edge", std::to_string(per_edge)}}));
+  const Model& model = setup.model;
+  const Options& opt = setup.opt;
+  State state = make_state(model, opt);
   std::vector<double> depths;
   for (double f : forces) {
-    const PressResult r = press_to_rest(model, state, f);
+    const PressResult r = press_to_rest(model, opt, setup.scene.verify.rest, state, f);
     EXPECT_TRUE(r.at_rest) << "F = " << f << " at " << per_edge << "^3";
     depths.push_back(r.indentation);
   }
@@ -87,12 +91,14 @@ namespace {
 TEST(HertzVerification, GradedCloudBeatsTheUniformOneAtEqualParticleCount) {
   const std::vector<double> forces = {10.36, 29.30, 53.83};
   auto l2_error = [&](const std::string& file, const SceneOverrides& overrides) {
-    const Model model = build_model(load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/" + file, overrides));
+    const test::Setup setup = test::setup_from(load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/" + file, overrides));
+    const Model& model = setup.model;
+    const Options& opt = setup.opt;
     EXPECT_EQ(model.particle_count, 1331);
-    State state = make_state(model);
+    State state = make_state(model, opt);
     double num = 0, den = 0;
     for (double f : forces) {
-      const PressResult r = press_to_rest(model, state, f);
+      const PressResult r = press_to_rest(model, opt, setup.scene.verify.rest, state, f);
       EXPECT_TRUE(r.at_rest) << file << ", F = " << f;
       const double layer = hertz::depth_finite_layer(f, 0.5, 1e4, 0.3, 2.0);
       num += std::pow(r.indentation - layer, 2);
@@ -136,10 +142,11 @@ TEST(HertzVerification, HapticSceneIsWithinTwoPercentOfTheFiniteCubeReference) {
   const std::optional<Reference> reference = find_reference(scene, dir / "references");
   ASSERT_TRUE(reference.has_value()) << "no stored reference for " << reference_key(scene);
   const Model model = build_model(scene);
+  const Options opt = options_of(scene);
   EXPECT_LE(model.particle_count, 2000);
-  State state = make_state(model);
+  State state = make_state(model, opt);
   for (double force : {10.36, 82.88, 327.6}) {
-    const PressResult r = press_to_rest(model, state, force);
+    const PressResult r = press_to_rest(model, opt, scene.verify.rest, state, force);
     ASSERT_TRUE(r.at_rest) << "F = " << force;
     const double d_ref = reference_indentation(*reference, force);
     EXPECT_NEAR(r.indentation / d_ref - 1.0, 0.0, 0.02) << "F = " << force << ", d = " << r.indentation;

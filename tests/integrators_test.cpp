@@ -36,23 +36,25 @@ double total_energy(const Model& m, const State& s) {
 
 // A smooth initial velocity field (a twist plus a stretch), 0.05 m/s. A state set by
 // hand restarts the health checks' energy budget (health.h).
-void set_initial_velocity(const Model& m, State& s) {
+void set_initial_velocity(const Model& m, const Options& opt, State& s) {
   for (int i = 0; i < m.particle_count; ++i) {
     const Vec3 X = m.rest_position.col(i) - Vec3(0.5, 0.5, 0.5);
     s.velocity.col(i) = 0.05 * Vec3(-X[1] * X[2] + X[0], X[0] * X[2], 0.5 * X[2] * X[2]);
   }
-  reset_health(m, s);
+  reset_health(m, opt, s);
 }
 
 // Energy history over `duration` seconds.
 std::vector<double> energy_history(const std::string& integrator, double dt, double duration, double damping = 0) {
-  const Model m = test::model_from_json(free_cube(integrator, dt, damping));
-  State s = make_state(m);
-  set_initial_velocity(m, s);
+  const test::Setup setup = test::setup_from_json(free_cube(integrator, dt, damping));
+  const Model& m = setup.model;
+  const Options& opt = setup.opt;
+  State s = make_state(m, opt);
+  set_initial_velocity(m, opt, s);
   std::vector<double> energy{total_energy(m, s)};
   const int steps = static_cast<int>(std::lround(duration / dt));
   for (int k = 0; k < steps; ++k) {
-    EXPECT_EQ(step(m, s), StepStatus::ok);
+    EXPECT_EQ(step(m, opt, s), StepStatus::ok);
     energy.push_back(total_energy(m, s));
   }
   return energy;
@@ -103,12 +105,14 @@ TEST(Integrators, MassProportionalDampingRemovesEnergy) {
 
 TEST(Integrators, FixedParticlesStayPut) {
   for (const char* integrator : {"rk4", "symplectic_euler", "implicit_euler"}) {
-    const Model m = test::model_from_json(free_cube(integrator, 0.01, 0.0, R"(["bottom"])"));
-    State s = make_state(m);
-    set_initial_velocity(m, s);
+    const test::Setup setup = test::setup_from_json(free_cube(integrator, 0.01, 0.0, R"(["bottom"])"));
+    const Model& m = setup.model;
+    const Options& opt = setup.opt;
+    State s = make_state(m, opt);
+    set_initial_velocity(m, opt, s);
     for (int i = 0; i < m.particle_count; ++i)
       if (m.fixed[i]) s.velocity.col(i).setZero();
-    for (int k = 0; k < 50; ++k) ASSERT_EQ(step(m, s), StepStatus::ok);
+    for (int k = 0; k < 50; ++k) ASSERT_EQ(step(m, opt, s), StepStatus::ok);
     double moved_fixed = 0, moved_free = 0;
     for (int i = 0; i < m.particle_count; ++i) {
       const double d = (s.position.col(i) - m.rest_position.col(i)).norm();

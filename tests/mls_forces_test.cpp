@@ -38,7 +38,7 @@ Points random_displacement(const Model& m, double scale, unsigned seed) {
 // Internal forces sum to zero and exert no torque about the origin (momentum conservation).
 void expect_no_net_force_or_torque(const Model& m, const Points& x) {
   Points f(3, m.particle_count);
-  internal_forces(m, x, f);
+  mls_internal_forces(m, x, f);
   Vec3 sum = Vec3::Zero(), torque = Vec3::Zero();
   for (int i = 0; i < m.particle_count; ++i) {
     sum += f.col(i);
@@ -94,14 +94,14 @@ TEST(MlsSolid, RigidMotionGivesZeroStrainAndZeroForce) {
     Points x(3, m.particle_count);
     for (int i = 0; i < m.particle_count; ++i) x.col(i) = R * m.rest_position.col(i) + Vec3(0.3, -1, 2);
     Points f(3, m.particle_count);
-    internal_forces(m, x, f);
+    mls_internal_forces(m, x, f);
     for (int i = 0; i < m.particle_count; ++i) {
       const Mat3 F = deformation_gradient(m, x, i);
       EXPECT_LT((F.transpose() * F - Mat3::Identity()).norm(), 1e-12);
     }
     // Scale: a typical force at 1 % strain is E * 0.01 * spacing^2 = 1000 * 0.01 * 0.04 = 0.4 N.
     EXPECT_LT(f.cwiseAbs().maxCoeff(), 1e-10);
-    EXPECT_NEAR(strain_energy(m, x), 0.0, 1e-14);
+    EXPECT_NEAR(mls_strain_energy(m, x), 0.0, 1e-14);
   }
 }
 
@@ -137,7 +137,7 @@ TEST(Material, UniaxialStretchGivesTextbookStVK) {
 void expect_forces_are_energy_gradient(const Model& m, double strain_scale) {
   const Points x = m.rest_position + random_displacement(m, strain_scale, 3);
   Points f(3, m.particle_count);
-  internal_forces(m, x, f);
+  mls_internal_forces(m, x, f);
   const double h = 1e-6;
   double worst = 0, typical = f.cwiseAbs().maxCoeff();
   for (int i = 0; i < m.particle_count; i += 7)
@@ -145,7 +145,7 @@ void expect_forces_are_energy_gradient(const Model& m, double strain_scale) {
       Points xp = x, xm = x;
       xp(c, i) += h;
       xm(c, i) -= h;
-      const double dUdx = (strain_energy(m, xp) - strain_energy(m, xm)) / (2 * h);
+      const double dUdx = (mls_strain_energy(m, xp) - mls_strain_energy(m, xm)) / (2 * h);
       worst = std::max(worst, std::abs(f(c, i) + dUdx));
     }
   EXPECT_LT(worst, 1e-6 * typical) << "typical force " << typical;
@@ -183,7 +183,7 @@ TEST(MlsSolid, HomogeneousStretchLeavesInteriorParticlesInEquilibriumOnALattice)
   Points x(3, m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) x.col(i) = m.rest_position.col(i) + G * m.rest_position.col(i);
   Points f(3, m.particle_count);
-  internal_forces(m, x, f);
+  mls_internal_forces(m, x, f);
   const double typical = f.cwiseAbs().maxCoeff();
   ASSERT_GT(typical, 0);
   int checked = 0;
@@ -196,24 +196,24 @@ TEST(MlsSolid, HomogeneousStretchLeavesInteriorParticlesInEquilibriumOnALattice)
   EXPECT_EQ(checked, 125);
 }
 
-// The tangent (force_differential at x) against central differences of the forces
+// The tangent (mls_force_differential at x) against central differences of the forces
 // along dx, and its symmetry dy . K dx = dx . K dy.
 void expect_tangent_matches_finite_differences(const Model& m, double strain_scale) {
   const Points x = m.rest_position + random_displacement(m, strain_scale, 5);
   const Points dx = random_displacement(m, 1.0, 9);
   std::vector<double> F, S;
-  linearize_forces(m, x, F, S);
+  mls_linearize(m, x, F, S);
   Points df(3, m.particle_count), fp(3, m.particle_count), fm(3, m.particle_count);
-  force_differential(m, F, S, dx, df);
+  mls_force_differential(m, F, S, dx, df);
   const double h = 1e-6;
-  internal_forces(m, x + h * dx, fp);
-  internal_forces(m, x - h * dx, fm);
+  mls_internal_forces(m, x + h * dx, fp);
+  mls_internal_forces(m, x - h * dx, fm);
   const Points fd = (fp - fm) / (2 * h);
   EXPECT_LT((df - fd).norm(), 1e-6 * fd.norm());
   // Symmetry of the tangent stiffness: dy . K dx = dx . K dy.
   const Points dy = random_displacement(m, 1.0, 13);
   Points dfy(3, m.particle_count);
-  force_differential(m, F, S, dy, dfy);
+  mls_force_differential(m, F, S, dy, dfy);
   EXPECT_NEAR((dy.array() * df.array()).sum(), (dx.array() * dfy.array()).sum(), 1e-9 * df.norm() * dy.norm());
 }
 
@@ -268,9 +268,9 @@ TEST(Corotational, RigidMotionIsForceFree) {
   Points x(3, m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) x.col(i) = R * m.rest_position.col(i) + Vec3(0.3, -1, 2);
   Points f(3, m.particle_count);
-  internal_forces(m, x, f);
+  mls_internal_forces(m, x, f);
   EXPECT_LT(f.cwiseAbs().maxCoeff(), 1e-10);
-  EXPECT_NEAR(strain_energy(m, x), 0.0, 1e-14);
+  EXPECT_NEAR(mls_strain_energy(m, x), 0.0, 1e-14);
 }
 
 TEST(Corotational, ForcesAreNegativeEnergyGradient) {
@@ -298,7 +298,7 @@ TEST(Corotational, VectorisedForcesMatchThePerParticleFormulaAtLargeStrain) {
     Points x = m.rest_position + random_displacement(m, 0.04, 21);
     for (int i = 0; i < m.particle_count; ++i) x.col(i) = Q * stretch * x.col(i);
     Points f(3, m.particle_count), expected = Points::Zero(3, m.particle_count);
-    internal_forces(m, x, f);
+    mls_internal_forces(m, x, f);
     for (int i = 0; i < m.particle_count; ++i) {
       Mat3 P;
       first_piola_stress(m, deformation_gradient(m, x, i), P);
@@ -359,7 +359,7 @@ TEST(LinearLaw, ForcesAreTheEnergyGradientAndTheTangentIsExact) {
       test::model_from_json(cloud_scene(kJittered, "", kLinear + R"(, "volume_stiffness": 700)")), 0.05);
   const Points x = m.rest_position + random_displacement(m, 0.05, 11);
   Points f(3, m.particle_count);
-  internal_forces(m, x, f);
+  mls_internal_forces(m, x, f);
   EXPECT_LT(f.rowwise().sum().norm(), 1e-11 * f.cwiseAbs().maxCoeff() * m.particle_count);
 }
 
@@ -405,7 +405,7 @@ double patch_residual(const Model& m) {
   Points x(3, m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) x.col(i) = m.rest_position.col(i) + G * m.rest_position.col(i);
   Points f(3, m.particle_count);
-  internal_forces(m, x, f);
+  mls_internal_forces(m, x, f);
   const Mat3 F = Mat3::Identity() + G;
   const Mat3 E = 0.5 * (F.transpose() * F - Mat3::Identity());
   const Mat3 P = F * (m.lame_lambda * E.trace() * Mat3::Identity() + 2 * m.lame_mu * E);
@@ -493,7 +493,7 @@ TEST(ConsistentIntegration, TetrahedralisationCloudForcesStayTheEnergyGradientAn
   const Mat3 R = Eigen::AngleAxisd(0.7, Vec3(1, -2, 2).normalized()).toRotationMatrix();
   Points xr(3, m.particle_count), f(3, m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) xr.col(i) = R * m.rest_position.col(i) + Vec3(-1, 0, 2);
-  internal_forces(m, xr, f);
+  mls_internal_forces(m, xr, f);
   EXPECT_LT(f.cwiseAbs().maxCoeff(), 1e-10);
 }
 
@@ -506,7 +506,7 @@ TEST(ConsistentIntegration, ForcesStayTheEnergyGradientFreeOfNetForceAndTorque) 
   const Mat3 R = Eigen::AngleAxisd(0.9, Vec3(-1, 2, 1).normalized()).toRotationMatrix();
   Points xr(3, m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) xr.col(i) = R * m.rest_position.col(i) + Vec3(1, 2, 3);
-  internal_forces(m, xr, f);
+  mls_internal_forces(m, xr, f);
   EXPECT_LT(f.cwiseAbs().maxCoeff(), 1e-10);
 }
 

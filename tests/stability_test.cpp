@@ -1,6 +1,6 @@
 // Stability tests with independent truths (issue #7, docs/stability.md): each one
 // fails when the mechanism it is about is switched off where it matters.
-//  - The paper's steps (physics.md §4) are stable by bench/stability.h's definition.
+//  - The paper's steps (physics.md §4) are stable by analysis/stability.h's definition.
 //  - Hourglass control: the checkerboard, a zero-energy mode of nodal integration,
 //    costs exactly its smooth envelope's energy without it (the hex FEM, which sees
 //    the checkerboard's strain, costs several times more) and more with it.
@@ -14,8 +14,9 @@
 #include <cmath>
 #include <string>
 
-#include "bench/stability.h"
-#include "core/diagnostics.h"
+#include "analysis/stability.h"
+#include "analysis/diagnostics.h"
+#include "analysis/rest.h"
 #include "core/model.h"
 #include "core/scene.h"
 #include "core/solid.h"
@@ -33,12 +34,21 @@ TEST(StabilityTest, PapersStepsAreStable) {
   // physics.md §4: explicit 1 ms for the meshless model, implicit 10 ms for the FEM (10^3 here).
   stability::TrialSpec trial;
   trial.force = 327.6;
-  const Model mls = build_model(default_scene({{"body.distribution.per_edge", "10"}}));
-  EXPECT_TRUE(stability::run_trial(stability::with_integrator(mls, IntegratorType::rk4, 1e-3, 10.0), trial).stable);
-  const Model fem = build_model(load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/hertz_cube_fem.json",
-                                           {{"body.distribution.per_edge", "10"}}));
+  auto with_integrator = [](const Scene& scene, IntegratorType type, double dt, double damping) {
+    Options opt = options_of(scene);
+    opt.integrator.type = type;
+    opt.integrator.dt = dt;
+    opt.integrator.damping = damping;
+    return opt;
+  };
+  const Scene mls_scene = default_scene({{"body.distribution.per_edge", "10"}});
+  const Model mls = build_model(mls_scene);
+  EXPECT_TRUE(stability::run_trial(mls, with_integrator(mls_scene, IntegratorType::rk4, 1e-3, 10.0), trial).stable);
+  const Scene fem_scene =
+      load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/hertz_cube_fem.json", {{"body.distribution.per_edge", "10"}});
+  const Model fem = build_model(fem_scene);
   EXPECT_TRUE(
-      stability::run_trial(stability::with_integrator(fem, IntegratorType::implicit_euler, 1e-2, 10.0), trial).stable);
+      stability::run_trial(fem, with_integrator(fem_scene, IntegratorType::implicit_euler, 1e-2, 10.0), trial).stable);
 }
 
 // Strain energy and generalised force of the enveloped checkerboard s_i A phi e over
@@ -88,16 +98,18 @@ TEST(StabilityTest, InvertedParticlesRecoverOnlyWithTheVolumeTerm) {
   // 14^3 (the smallest uniform cloud on which it happens), the default scene's RK4 at
   // 1 ms with damping 10/s: 6000 N (Hertz d/R > 1) for 1.5 s, then the command drops to
   // zero and the indenter is thrown off. The rebound leaves particles inverted.
-  const Model base = build_model(default_scene({{"body.distribution.per_edge", "14"}}));
-  State pressed = make_state(base);
+  const Scene scene = default_scene({{"body.distribution.per_edge", "14"}});
+  const Model base = build_model(scene);
+  const Options opt = options_of(scene);
+  State pressed = make_state(base, opt);
   pressed.force_command = 6000.0;
-  for (int k = 0; k < 1500; ++k) ASSERT_NE(step(base, pressed), StepStatus::non_finite);
+  for (int k = 0; k < 1500; ++k) ASSERT_NE(step(base, opt, pressed), StepStatus::non_finite);
   auto release = [&](double kv) {
     Model m = base;
     m.volume_stiffness = kv;
     State s = pressed;
     s.force_command = 0.0;
-    for (int k = 0; k < 3000; ++k) EXPECT_NE(step(m, s), StepStatus::non_finite);
+    for (int k = 0; k < 3000; ++k) EXPECT_NE(step(m, opt, s), StepStatus::non_finite);
     return std::pair{inversion_summary(m, s.position), (s.position - m.rest_position).colwise().norm().maxCoeff()};
   };
   // Without k_v: stuck inverted (det F < 0 with zero StVK stress is an equilibrium).
@@ -105,7 +117,7 @@ TEST(StabilityTest, InvertedParticlesRecoverOnlyWithTheVolumeTerm) {
   EXPECT_GT(stuck.inverted, 0);
   EXPECT_GT(stuck_residual, 0.1 * base.min_spacing);
   // With k_v = 0.1 E: back to the reference shape.
-  const auto [recovered, residual] = release(0.1 * base.scene.material.young_modulus);
+  const auto [recovered, residual] = release(0.1 * scene.material.young_modulus);
   EXPECT_EQ(recovered.inverted, 0);
   EXPECT_GT(recovered.min_jacobian, 0.99);
   EXPECT_LT(residual, 1e-3 * base.min_spacing);

@@ -10,12 +10,13 @@
 #include <fstream>
 #include <sstream>
 
+#include "analysis/rest.h"
 #include "core/hertz.h"
 #include "core/indentation.h"
-#include "core/reference.h"
+#include "analysis/reference.h"
 #include "core/solid.h"
 #include "core/state.h"
-#include "core/static_contact.h"
+#include "analysis/static_contact.h"
 #include "test_util.h"
 
 namespace palpate {
@@ -29,15 +30,17 @@ std::string fem_scene(int per_edge, const std::string& distribution = "grid", co
 }
 
 TEST(LinearStaticContact, SignoriniConditionsAndForceBalance) {
-  const Model model = test::model_from_json(fem_scene(11, "graded_grid"));
+  const test::Setup setup = test::setup_from_json(fem_scene(11, "graded_grid"));
+  const Model& model = setup.model;
+  const Options& opt = setup.opt;
   LinearStaticContact solver(model);
-  State state = make_state(model);
+  State state = make_state(model, opt);
   for (double F : {5.0, 60.0, 250.0}) {
     const StaticSolution sol = solver.solve(F, &state);
     ASSERT_TRUE(sol.converged) << sol.message;
     // Multipliers >= 0 and summing to the command.
     double sum = 0;
-    for (double p : state.contact_multiplier) {
+    for (double p : state.contact_normal_force) {
       EXPECT_GE(p, 0.0);
       sum += p;
     }
@@ -55,7 +58,7 @@ TEST(LinearStaticContact, SignoriniConditionsAndForceBalance) {
       EXPECT_GE(gap[i], -1e-10) << "node " << i << " penetrates at F = " << F;
     }
     for (size_t a = 0; a < state.contact_index.size(); ++a)
-      if (state.contact_multiplier[a] > 1e-9 * F) {
+      if (state.contact_normal_force[a] > 1e-9 * F) {
         EXPECT_NEAR(gap[state.contact_index[a]], 0.0, 1e-10);
       }
     // Equilibrium with the element-by-element forces: f_int + f_contact = 0 at free nodes,
@@ -79,13 +82,15 @@ TEST(LinearStaticContact, AgreesWithTheDynamicSettle) {
   // The dynamic settle uses the exact sphere (radial normals, deformed configuration);
   // the static solve linearises the gap vertically. They differ at O((a/R)^2): below
   // 0.5 % at these depths (a/R < 0.25).
-  const Model model = test::model_from_json(fem_scene(9));
+  const test::Setup setup = test::setup_from_json(fem_scene(9));
+  const Model& model = setup.model;
+  const Options& opt = setup.opt;
   LinearStaticContact solver(model);
-  State dynamic = make_state(model);
+  State dynamic = make_state(model, opt);
   for (double F : {20.0, 80.0}) {
     const StaticSolution sol = solver.solve(F);
     ASSERT_TRUE(sol.converged);
-    const PressResult press = press_to_rest(model, dynamic, F);
+    const PressResult press = press_to_rest(model, opt, setup.scene.verify.rest, dynamic, F);
     ASSERT_TRUE(press.at_rest);
     EXPECT_NEAR(press.indentation, sol.indentation, 5e-3 * sol.indentation) << "F = " << F;
   }
@@ -94,11 +99,13 @@ TEST(LinearStaticContact, AgreesWithTheDynamicSettle) {
 TEST(RelaxToRest, AgreesWithTheDynamicSettleForTheMeshlessSolid) {
   const std::string scene = R"({"body": {"distribution": {"per_edge": 8}},
                                 "integrator": {"type": "symplectic_euler", "dt": 0.001, "damping": 10}})";
-  const Model model = test::model_from_json(scene);
-  State relaxed = make_state(model), dynamic = make_state(model);
-  const StaticSolution sol = relax_to_rest(model, relaxed, 60.0);
+  const test::Setup setup = test::setup_from_json(scene);
+  const Model& model = setup.model;
+  const Options& opt = setup.opt;
+  State relaxed = make_state(model, opt), dynamic = make_state(model, opt);
+  const StaticSolution sol = relax_to_rest(model, opt, setup.scene.verify.rest, relaxed, 60.0);
   ASSERT_TRUE(sol.converged) << sol.message;
-  const PressResult press = press_to_rest(model, dynamic, 60.0);
+  const PressResult press = press_to_rest(model, opt, setup.scene.verify.rest, dynamic, 60.0);
   ASSERT_TRUE(press.at_rest);
   // Both stop when the rest criteria hold (force balance 1e-3, motion 1e-4 m/s).
   EXPECT_NEAR(sol.indentation, press.indentation, 2e-3 * press.indentation);

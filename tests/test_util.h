@@ -3,6 +3,7 @@
 #include <string>
 
 #include "core/model.h"
+#include "core/options.h"
 #include "core/scene.h"
 
 namespace palpate::test {
@@ -11,5 +12,14 @@ namespace palpate::test {
 inline Scene scene_from_json(const std::string& json) { return parse_scene(json, "inline-test-scene", "."); }
 
 inline Model model_from_json(const std::string& json) { return build_model(scene_from_json(json)); }
+
+// What a test that steps needs: the scene, its model and its options.
+struct Setup {
+  Scene scene;
+  Model model;
+  Options opt;
+};
+inline Setup setup_from(const Scene& scene) { return {scene, build_model(scene), options_of(scene)}; }
+inline Setup setup_from_json(const std::string& json) { return setup_from(scene_from_json(json)); }
 
 }  // namespace palpate::test

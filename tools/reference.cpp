@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "clients/cli.h"
+#include "cli/arguments.h"
 #include "core/hertz.h"
-#include "core/reference.h"
+#include "analysis/reference.h"
 #include "core/scene.h"
 
 using namespace palpate;

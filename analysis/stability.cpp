@@ -1,11 +1,12 @@
-#include "bench/stability.h"
+#include "analysis/stability.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
 
-#include "core/diagnostics.h"
+#include "analysis/diagnostics.h"
+#include "analysis/rest.h"
 #include "core/indentation.h"
 #include "core/solid.h"
 #include "core/state.h"
@@ -23,33 +24,19 @@ std::string definition(const TrialSpec& s) {
   return text;
 }
 
-Model with_integrator(const Model& model, double dt) {
-  Model m = model;
-  m.scene.integrator.dt = dt;
-  return m;
-}
-
-Model with_integrator(const Model& model, IntegratorType type, double dt, double damping) {
-  Model m = model;
-  m.scene.integrator.type = type;
-  m.scene.integrator.dt = dt;
-  m.scene.integrator.damping = damping;
-  return m;
-}
-
-Trial run_trial(const Model& model, const TrialSpec& spec) {
-  State state = make_state(model);
+Trial run_trial(const Model& model, const Options& opt, const TrialSpec& spec) {
+  State state = make_state(model, opt);
   state.force_command = spec.force;
-  const double dt = model.scene.integrator.dt;
+  const double dt = opt.integrator.dt;
   const double R = model.indenter_radius;
   const double z0 = state.indenter_center[2];
-  const double e0 = total_energy(model, state);
+  const double e0 = total_energy(model, opt, state);
   const long steps = std::max(spec.min_steps, std::lround(spec.duration / dt));
   const long check_every = std::max(1L, steps / 50);
   Trial t;
   for (long k = 1; k <= steps; ++k) {
     t.steps = k;
-    if (step(model, state) == StepStatus::non_finite) {
+    if (step(model, opt, state) == StepStatus::non_finite) {
       t.stable = false;
       t.reason = "non-finite state";
       t.final_indentation = NAN;
@@ -70,7 +57,7 @@ Trial run_trial(const Model& model, const TrialSpec& spec) {
       return t;
     }
     if (k % check_every == 0 || k == steps) {
-      const double energy = total_energy(model, state);
+      const double energy = total_energy(model, opt, state);
       const double bound = spec.energy_factor * (e0 + std::abs(spec.force * (state.indenter_center[2] - z0)));
       if (!(energy <= bound)) {
         t.stable = false;
@@ -84,13 +71,15 @@ Trial run_trial(const Model& model, const TrialSpec& spec) {
   return t;
 }
 
-Search find_stable_dt(const Model& model, const TrialSpec& trial, const SearchSpec& search,
+Search find_stable_dt(const Model& model, const Options& opt, const TrialSpec& trial, const SearchSpec& search,
                       const std::function<void(double, const Trial&)>& progress) {
   Search out;
   double lo = NAN, hi = NAN;
   double failure_dt = INFINITY;  // the smallest unstable dt so far
   auto stable = [&](double dt) {
-    const Trial t = run_trial(with_integrator(model, dt), trial);
+    Options at_dt = opt;
+    at_dt.integrator.dt = dt;
+    const Trial t = run_trial(model, at_dt, trial);
     ++out.trials;
     if (!t.stable && dt < failure_dt) {
       failure_dt = dt;

@@ -1,4 +1,4 @@
-#include "core/reference.h"
+#include "analysis/reference.h"
 
 #include <chrono>
 #include <fstream>
@@ -9,7 +9,7 @@
 
 #include "core/model.h"
 #include "core/node_cloud.h"
-#include "core/static_contact.h"
+#include "analysis/static_contact.h"
 
 namespace palpate {
 

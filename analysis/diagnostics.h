@@ -1,20 +1,21 @@
 #pragma once
-// Read-only diagnostics of a state for the stability studies (bench/stress.cpp,
+// Read-only diagnostics of a state for the stability studies (tools/stress/,
 // tests/stability_test.cpp) and for per-step checks: energies and the
 // deformation-gradient determinants that show inverted material. Nothing here
 // is called by step(); every function works for both solid models.
 #include <vector>
 
 #include "core/model.h"
+#include "core/options.h"
 #include "core/state.h"
 #include "core/types.h"
 
 namespace palpate {
 
-// Kinetic energy of the free particles and of the indenter, J.
-double kinetic_energy(const Model& model, const State& state);
+// Kinetic energy of the free particles and of the indenter (of mass opt.indenter_mass), J.
+double kinetic_energy(const Model& model, const Options& opt, const State& state);
 // Kinetic energy plus strain energy (elastic_energy of core/solid.h), J.
-double total_energy(const Model& model, const State& state);
+double total_energy(const Model& model, const Options& opt, const State& state);
 
 // det F of the deformation gradient where the model evaluates it: per particle
 // for the MLS solid (A-9, every particle, fixed ones included), at the 2x2x2

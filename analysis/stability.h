@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/model.h"
+#include "core/options.h"
 #include "core/scene.h"
 
 namespace palpate::stability {
@@ -36,13 +37,8 @@ struct Trial {
   long steps = 0;  // steps run (fewer than planned when it failed)
 };
 
-// `model` with the integrator's dt (and, optionally, type and damping) replaced:
-// the Model depends on them only through model.scene (as static_contact.cpp's relaxation).
-Model with_integrator(const Model& model, double dt);
-Model with_integrator(const Model& model, IntegratorType type, double dt, double damping);
-
-// One trial of `model` at its scene's dt.
-Trial run_trial(const Model& model, const TrialSpec& spec);
+// One trial of `model` with the options `opt` (at opt.integrator.dt).
+Trial run_trial(const Model& model, const Options& opt, const TrialSpec& spec);
 
 struct SearchSpec {
   double start = 1e-3;        // s, the first dt tried (the bracket doubles up or halves down from it)
@@ -60,8 +56,9 @@ struct Search {
 };
 
 // Brackets [stable, unstable] by doubling up or halving down from search.start,
-// then bisects geometrically. `progress(dt, trial)` (optional) after every trial.
-Search find_stable_dt(const Model& model, const TrialSpec& trial, const SearchSpec& search,
+// then bisects geometrically; every trial runs `opt` with its dt replaced.
+// `progress(dt, trial)` (optional) after every trial.
+Search find_stable_dt(const Model& model, const Options& opt, const TrialSpec& trial, const SearchSpec& search,
                       const std::function<void(double, const Trial&)>& progress = {});
 
 }  // namespace palpate::stability

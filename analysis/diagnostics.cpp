@@ -1,4 +1,4 @@
-#include "core/diagnostics.h"
+#include "analysis/diagnostics.h"
 
 #include <Eigen/LU>
 #include <algorithm>
@@ -11,15 +11,15 @@
 
 namespace palpate {
 
-double kinetic_energy(const Model& model, const State& state) {
-  double e = 0.5 * model.indenter_mass * state.indenter_velocity * state.indenter_velocity;
+double kinetic_energy(const Model& model, const Options& opt, const State& state) {
+  double e = 0.5 * opt.indenter_mass * state.indenter_velocity * state.indenter_velocity;
   for (int i = 0; i < model.particle_count; ++i)
     if (model.inverse_mass[i] != 0.0) e += 0.5 * model.mass[i] * state.velocity.col(i).squaredNorm();
   return e;
 }
 
-double total_energy(const Model& model, const State& state) {
-  return kinetic_energy(model, state) + elastic_energy(model, state.position);
+double total_energy(const Model& model, const Options& opt, const State& state) {
+  return kinetic_energy(model, opt, state) + elastic_energy(model, state.position);
 }
 
 namespace {

@@ -15,13 +15,15 @@
 #include <string>
 #include <vector>
 
-#include "clients/cli.h"
+#include "cli/arguments.h"
 #include "core/health.h"
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/model.h"
-#include "core/reference.h"
-#include "core/static_contact.h"
+#include "analysis/reference.h"
+#include "analysis/static_contact.h"
+#include "analysis/rest.h"
+#include "core/options.h"
 #include "core/scene.h"
 #include "core/state.h"
 #include "core/step.h"
@@ -175,7 +177,8 @@ int main(int argc, char** argv) {
   }
   if (!quiet && !reference_note.empty()) std::fprintf(stderr, "palpate-verify: %s\n", reference_note.c_str());
 
-  State state = make_state(model);
+  const Options opt = options_of(scene);
+  State state = make_state(model, opt);
   std::unique_ptr<LinearStaticContact> linear_static;
   if (static_solve && has_linear_static_solve(model)) linear_static = std::make_unique<LinearStaticContact>(model);
   std::vector<Row> rows;
@@ -198,13 +201,13 @@ int main(int argc, char** argv) {
     const double t0 = state.time;
     if (static_solve) {
       const StaticSolution sol =
-          linear_static ? linear_static->solve(row.force, &state) : relax_to_rest(model, state, row.force);
+          linear_static ? linear_static->solve(row.force, &state) : relax_to_rest(model, opt, scene.verify.rest, state, row.force);
       row.steps = sol.iterations;
       row.at_rest = sol.converged;
       if (!sol.converged && !quiet) std::fprintf(stderr, "    static solve: %s\n", sol.message.c_str());
     } else {
     const long trace_every = trace_interval > 0 ? std::max(1L, std::lround(trace_interval / scene.integrator.dt)) : 0;
-    const PressResult press = press_to_rest(model, state, row.force, [&](const State& s) {
+    const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, row.force, [&](const State& s) {
       if (trace_every > 0 && s.tick % trace_every == 0)
         std::fprintf(stderr, "    t = %8.3f s  d = %.6f m  contact %9.4f N (%zu particles)  v_ind = %+.2e  max v = %.2e m/s\n",
                      s.time, indentation(model, s), s.indenter_contact_force, s.contact_index.size(),
@@ -221,7 +224,7 @@ int main(int argc, char** argv) {
     row.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     row.sim_time = state.time - t0;
     if (row.status == "diverged") {
-      state = make_state(model);  // start the next force from the rest state
+      state = make_state(model, opt);  // start the next force from the rest state
     } else {
       row.d_sim = indentation(model, state);
       row.contact_force = state.indenter_contact_force;

@@ -25,6 +25,7 @@
 #include <string>
 
 #include "core/model.h"
+#include "core/options.h"
 #include "core/state.h"
 
 namespace palpate {
@@ -63,9 +64,11 @@ class LinearStaticContact {
 };
 
 // Nonlinear models (and any other): pseudo-transient continuation from the state
-// given. `residual_tolerance` is relative to the commanded force.
-StaticSolution relax_to_rest(const Model& model, State& state, double force, double residual_tolerance = 1e-6,
-                             int max_steps = 500);
+// given (implicit Euler steps of growing length with opt's dt as the first), then,
+// if it stalls, the damped dynamics of `opt` until `rest` holds (press_to_rest).
+// `residual_tolerance` is relative to the commanded force.
+StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestSpec& rest, State& state, double force,
+                             double residual_tolerance = 1e-6, int max_steps = 500);
 
 // Whether a model has the exact linear solve (the linear hex FEM).
 bool has_linear_static_solve(const Model& model);

@@ -1,4 +1,4 @@
-#include "core/static_contact.h"
+#include "analysis/static_contact.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
@@ -10,6 +10,9 @@
 #include <stdexcept>
 
 #include "core/contact.h"
+#include "analysis/rest.h"
+#include "core/checkpoint.h"
+#include "core/health.h"
 #include "core/indentation.h"
 #include "core/integrators.h"
 #include "core/solid.h"
@@ -191,11 +194,11 @@ struct LinearStaticContact::Impl {
     state.indenter_velocity = 0.0;
     state.force_command = force;
     state.contact_index.clear();
-    state.contact_multiplier.clear();
+    state.contact_normal_force.clear();
     for (size_t a = 0; a < active.size(); ++a) {
       state.contact_force.col(static_cast<Eigen::Index>(a)) = Vec3(0, 0, -p[a]);
       state.contact_index.push_back(candidate[active[a]]);
-      state.contact_multiplier.push_back(p[a]);
+      state.contact_normal_force.push_back(p[a]);
     }
     state.indenter_contact_force = p.sum();
   }
@@ -211,65 +214,51 @@ int LinearStaticContact::columns_computed() const { return impl_->columns_comput
 // ---------------------------------------------------------------------------
 // Nonlinear models: pseudo-transient continuation with the implicit Euler step.
 
-StaticSolution relax_to_rest(const Model& model, State& state, double force, double residual_tolerance,
-                             int max_steps) {
+StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestSpec& rest, State& state, double force,
+                             double residual_tolerance, int max_steps) {
   StaticSolution out;
   if (!(force >= 0.0) || !std::isfinite(force)) {
     out.message = "the force must be finite and >= 0";
     return out;
   }
-  // The continuation runs on a copy of the model whose integrator is implicit Euler
-  // without damping and whose indenter weighs as much as the body (the masses only
-  // regularise the steps; a light sphere's free motion would overshoot at large dt).
-  // A step whose residual grows is rejected and retried with half the step; an
-  // accepted one doubles it.
-  Model relax = model;
-  relax.scene.integrator.type = IntegratorType::implicit_euler;
-  relax.scene.integrator.damping = 0.0;
-  relax.indenter_mass = std::max(model.indenter_mass, std::accumulate(model.mass.begin(), model.mass.end(), 0.0));
-  State work = make_state(relax);  // the implicit integrator's workspace
-  work.position = state.position;
-  work.indenter_center = state.indenter_center;
-  work.contact_index = state.contact_index;
-  work.contact_multiplier = state.contact_multiplier;
-  work.contact_force = state.contact_force;
-  work.indenter_contact_force = state.indenter_contact_force;
-  work.force_command = force;
-  double& dt = relax.scene.integrator.dt;
+  // The continuation runs with options of its own: implicit Euler without damping, and
+  // an indenter that weighs as much as the body (the masses only regularise the
+  // steps; a light sphere's free motion would overshoot at large dt). A step whose
+  // residual grows is rejected (the checkpoint puts the state back) and retried with
+  // half the step; an accepted one doubles it.
+  Options relax = opt;
+  relax.integrator.type = IntegratorType::implicit_euler;
+  relax.integrator.damping = 0.0;
+  relax.indenter_mass = std::max(opt.indenter_mass, std::accumulate(model.mass.begin(), model.mass.end(), 0.0));
+  state.force_command = force;
+  double& dt = relax.integrator.dt;
   const double dt_max = 1e4, dt_min = 1e-9;
   Points f(3, model.particle_count);
   auto residual_of = [&](const State& s) {  // free particles' net force and the indenter's imbalance, N
-    elastic_forces(relax, s.position, f);
+    elastic_forces(model, s.position, f);
     add_contact_forces(s, f);
     double r = 0.0;
     for (int i = 0; i < model.particle_count; ++i)
       if (!model.fixed[i]) r = std::max(r, f.col(i).norm());
     return std::max(r, std::abs(s.indenter_contact_force - force));
   };
-  double residual = residual_of(work);
+  state.velocity.setZero();
+  state.indenter_velocity = 0.0;
+  double residual = residual_of(state);
   const double target = residual_tolerance * std::max(force, 1e-300);
   int rejected_in_a_row = 0;
+  Checkpoint accepted(state);
   for (int k = 0; k < max_steps && residual > target; ++k) {
-    const Points saved_position = work.position;
-    const Vec3 saved_indenter = work.indenter_center;
-    const std::vector<int> saved_index = work.contact_index;
-    const std::vector<double> saved_multiplier = work.contact_multiplier;
-    const double saved_contact = work.indenter_contact_force;
-    const Points saved_force = work.contact_force;
-    work.velocity.setZero();
-    work.indenter_velocity = 0.0;
-    const StepStatus status = step(relax, work);
+    accepted.save(state);
+    state.velocity.setZero();
+    state.indenter_velocity = 0.0;
+    const StepStatus status = step(model, relax, state);
     out.iterations = k + 1;
-    const double next = status == StepStatus::non_finite ? INFINITY : residual_of(work);
+    const double next = status == StepStatus::non_finite ? INFINITY : residual_of(state);
     spdlog::debug("relax_to_rest: step {} dt {:.3g} s residual {:.3e} N d {:.6f} m contact {:.4f} N ({} nodes)", k, dt,
-                  next, indentation(model, work), work.indenter_contact_force, work.contact_index.size());
+                  next, indentation(model, state), state.indenter_contact_force, state.contact_index.size());
     if (!(next < residual)) {  // reject: restore and halve the step
-      work.position = saved_position;
-      work.indenter_center = saved_indenter;
-      work.contact_index = saved_index;
-      work.contact_multiplier = saved_multiplier;
-      work.contact_force = saved_force;
-      work.indenter_contact_force = saved_contact;
+      accepted.restore(state);
       dt *= 0.5;
       if (dt < dt_min || ++rejected_in_a_row > 6) break;  // stalled: the dynamic settle finishes
       continue;
@@ -278,15 +267,14 @@ StaticSolution relax_to_rest(const Model& model, State& state, double force, dou
     rejected_in_a_row = 0;
     dt = std::min(dt_max, 2.0 * dt);
   }
-  work.velocity.setZero();
-  work.indenter_velocity = 0.0;
-  work.work = std::move(state.work);  // the caller's own integrator's workspace
-  work.force_command = force;
-  state = std::move(work);
+  state.velocity.setZero();
+  state.indenter_velocity = 0.0;
+  // The continuation's energy bookkeeping (its heavy indenter) is not the caller's.
+  reset_health(model, opt, state);
   out.converged = residual <= target;
   if (!out.converged) {
     // Polish with the scene's own damped dynamics (the dynamic settle of palpate-verify).
-    const PressResult press = press_to_rest(model, state, force);
+    const PressResult press = press_to_rest(model, opt, rest, state, force);
     out.iterations += static_cast<int>(press.steps);
     out.converged = press.at_rest;
     if (!press.at_rest) out.message = "neither the continuation nor the dynamic settle reached rest";

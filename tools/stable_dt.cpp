@@ -9,8 +9,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "bench/stability.h"
-#include "clients/cli.h"
+#include "analysis/stability.h"
+#include "cli/arguments.h"
 #include "core/model.h"
 #include "core/scene.h"
 
@@ -87,7 +87,7 @@ int main(int argc, char** argv) {
   const std::string definition = stability::definition(trial);
   const auto start = std::chrono::steady_clock::now();
   const stability::Search found =
-      stability::find_stable_dt(model, trial, search, [&](double dt, const stability::Trial& t) {
+      stability::find_stable_dt(model, options_of(scene), trial, search, [&](double dt, const stability::Trial& t) {
         if (!quiet) std::fprintf(stderr, "  dt = %.4e s: %s (d = %.5f m)\n", dt, t.reason.c_str(), t.final_indentation);
       });
   const double lo = found.dt_max_stable, hi = found.dt_min_unstable;
@@ -114,7 +114,7 @@ int main(int argc, char** argv) {
     out["neighbors"] = scene.mls.neighbors;
     out["support_factor"] = scene.mls.support_factor;
     out["hourglass"] = scene.mls.hourglass;
-    out["indenter_mass"] = model.indenter_mass;
+    out["indenter_mass"] = scene.indenter.mass;
     out["damping"] = scene.integrator.damping;
     out["tolerance"] = tolerance;
     out["trials"] = trials;

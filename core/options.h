@@ -1,0 +1,37 @@
+#pragma once
+// The options of a step: what a caller may change between two steps without
+// rebuilding the Model (MuJoCo's mjModel.opt, kept apart from the constant Model).
+// Every stage that needs one takes `const Options&`; nothing in the Model or the
+// State depends on them, so a caller can switch the integrator, dt, damping,
+// gravity, the contact solve or the health limits of a running State.
+//
+// A scene gives the initial options (options_of); check_options (time_step.h)
+// refuses a dt outside the measured stable envelope of the model.
+#include "core/scene.h"
+#include "core/types.h"
+
+namespace palpate {
+
+struct Options {
+  IntegratorSpec integrator;   // scene "integrator": type, dt (s), damping (1/s), CG settings
+  ContactSpec contact;         // scene "contact": tolerance (m), pivots
+  Vec3 gravity{0.0, 0.0, 0.0};  // m/s^2, on the body and the indenter
+  HealthSpec health;           // scene "health": per-step checks and their limits
+  // kg, the indenter's inertia. An option rather than a model constant: it only sets
+  // how the sphere answers its command (a quasi-static solve makes it heavy; a
+  // haptic coupling tunes it) and no precomputed quantity depends on it.
+  double indenter_mass = 1.0;
+};
+
+// The options a scene starts with.
+inline Options options_of(const Scene& scene) {
+  Options o;
+  o.integrator = scene.integrator;
+  o.contact = scene.contact;
+  o.gravity = scene.gravity;
+  o.health = scene.health;
+  o.indenter_mass = scene.indenter.mass;
+  return o;
+}
+
+}  // namespace palpate
