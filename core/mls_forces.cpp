@@ -605,6 +605,8 @@ bool use_blocks(const Model& m) {
 
 }  // namespace
 
+bool detail::uses_blocked_loops(const Model& model) { return use_blocks(model); }
+
 Mat3 deformation_gradient(const Model& model, const Points& x, int i) { return gradient_at(model, x.data(), i); }
 
 double first_piola_stress(const Model& model, const Mat3& F, Mat3& P) { return piola_stress(model, F, P); }

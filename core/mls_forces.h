@@ -37,4 +37,12 @@ void mls_force_differential(const Model& model, const std::vector<double>& tange
 // as the St Venant-Kirchhoff law does them.
 double mls_internal_forces_flops(const Model& model);
 
+namespace detail {
+// Whether internal_forces and force_differential take the vectorised loops over
+// Model::blocks (true) or the per-particle reference loops (hourglass control on, or a
+// Model without blocks). For tests: a copy of a Model with its blocks cleared runs the
+// reference loops on the same support domains, weights and volumes.
+bool uses_blocked_loops(const Model& model);
+}  // namespace detail
+
 }  // namespace palpate
