@@ -31,7 +31,7 @@ struct InversionSummary {
 InversionSummary inversion_summary(const Model& model, const Points& x);
 
 // The checkerboard pattern s_i = (-1)^(a+b+c) of lattice node (a, b, c), the
-// pattern of nodal integration's zero-energy mode (physics.md §1). Needs a
+// pattern of nodal integration's zero-energy mode (docs/physics.md §1). Needs a
 // lattice cloud (grid or graded_grid): throws std::invalid_argument otherwise.
 std::vector<double> checkerboard_sign(const Model& model);
 // Amplitude of the checkerboard in a displacement field u = x - X (3 x n):

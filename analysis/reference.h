@@ -1,5 +1,5 @@
 #pragma once
-// The converged reference of the finite block (physics.md §3): the linear
+// The converged reference of the finite block (docs/physics.md §5, "The finite-block reference"): the linear
 // hexahedral FEM of the scene's block, material, fixed faces and sphere, solved
 // quasi-statically and exactly (static_contact.h) on a family of lattices graded
 // toward the contact point and refined uniformly in the graded coordinate, with
@@ -29,7 +29,7 @@ namespace palpate {
 struct ReferenceOptions {
   std::vector<int> levels{17, 25, 33, 41};  // nodes per edge, coarse to fine (at least 3)
   int base_per_edge = 21;                   // the lattice on which first_spacing is given
-  double base_first_spacing = 0.025;        // m, at base_per_edge (physics.md §6: 0.02 ... 0.03)
+  double base_first_spacing = 0.025;        // m, at base_per_edge (docs/physics.md §6, "Grading toward the contact fixes it cheaply")
 };
 
 struct ReferenceLevel {
@@ -58,8 +58,8 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
                                 const ReferenceOptions& options = {},
                                 const std::function<void(const std::string&)>& progress = {});
 
-// d*(F) at an arbitrary force in the reference's range: interpolation of d^(2/3)
-// against F (Hertz: d ~ F^(2/3)), exact at the reference forces. NaN outside the range.
+// d*(F) at an arbitrary force in the reference's range: d^(3/2) interpolated linearly
+// in F (Hertz: F ~ d^(3/2)), exact at the reference forces. NaN outside the range.
 double reference_indentation(const Reference& reference, double force);
 
 // Extrapolates d(h) = d* + C h^p from three (h, d) pairs, h decreasing. Returns

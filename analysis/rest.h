@@ -1,5 +1,5 @@
 #pragma once
-// Rest detection and the quasi-static loading of a verification run (physics.md §2):
+// Rest detection and the quasi-static loading of a verification run (docs/physics.md §2):
 // what palpate-verify and the static solve need and a real-time loop never runs.
 #include <cmath>
 
@@ -13,7 +13,7 @@ namespace palpate {
 // Largest particle speed, m/s.
 double max_particle_speed(const State& state);
 
-// Equilibrium (physics.md §2): over a window of `window` seconds of simulated time
+// Equilibrium (docs/physics.md §2): over a window of `window` seconds of simulated time
 // the contact force balanced the command to force_tolerance (relative) at every
 // step, and no particle and not the indenter moved more than
 // velocity_tolerance * window (a mean speed below velocity_tolerance). Judging

@@ -1,7 +1,7 @@
 #pragma once
 // The stable time step of a model by bisection on trial runs: one definition of
 // "stable" and one search, shared by palpate-stable-dt and palpate-stress
-// (physics.md §1, "Time step": measure the real limit, compare with c dx_min / c_p).
+// (docs/physics.md §1, "Time step": measure the real limit, compare with c dx_min / c_p).
 #include <cmath>
 #include <functional>
 #include <string>

@@ -1,5 +1,5 @@
 #pragma once
-// Quasi-static solve (physics.md §5): the rest state under a commanded indenter
+// Quasi-static solve (docs/physics.md §5): the rest state under a commanded indenter
 // force, found directly instead of by a dynamic settle.
 //
 // For the linear hexahedral FEM it is exact: the stiffness K over the free DOFs
@@ -9,7 +9,7 @@
 // compliance C = K^-1 of those nodes:
 //   w = h - d + C p >= 0,  p >= 0,  p . w = 0,  sum p = F,
 // with h_i the undeformed gap of node i when the sphere touches the surface
-// (d = 0), d the indentation (physics.md §2) and p the nodal contact forces. It is
+// (d = 0), d the indentation (docs/physics.md §2) and p the nodal contact forces. It is
 // solved by an active-set method: for a fixed active set A the conditions w_A = 0
 // and sum p = F give d and p_A in closed form, nodes with p < 0 leave A, nodes with
 // w < 0 join it, until neither happens. Columns of C are computed only for nodes
@@ -32,7 +32,7 @@ namespace palpate {
 
 struct StaticSolution {
   bool converged = false;
-  double indentation = 0.0;     // d, m (physics.md §2)
+  double indentation = 0.0;     // d, m (docs/physics.md §2)
   double contact_force = 0.0;   // sum of the contact forces on the body, N
   int active_count = 0;         // nodes in contact
   int iterations = 0;           // active-set changes (linear) or continuation steps (nonlinear)

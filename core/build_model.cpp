@@ -74,9 +74,10 @@ void build_force_blocks(Model& m) {
     m.block_slots.resize(block.slot_end, Model::NeighborSlot{});
     for (int l = 0; l < W; ++l) {
       const int i = W * b + l;
-      if (i >= n) {  // padding lane: weightless, its neighbours are particle 0
+      if (i >= n) {  // padding lane: weightless, its neighbours are particle 0, F = I (stress free, and
+                     // no law meets a singular F there: the vectorised polar decomposition needs det F > 0)
         block.volume[l] = 0.0;
-        for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = 0.0;
+        for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
         for (int c = 0; c < 3; ++c) block.self_weight[c][l] = 0.0;
         continue;
       }
@@ -124,7 +125,7 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
   constexpr double kAdaptiveConditionLimit = 1e4;
 
   // Support radius h_i = alpha * (mean distance to the k_i neighbours | the k_i-th's distance)
-  // (physics.md §1).
+  // (docs/physics.md §1).
   std::vector<double> mean_distance(n);
   std::vector<int> support_count(n, k);
   m.support_radius.resize(n);
@@ -305,7 +306,7 @@ void set_boundary_and_indenter(Model& m, const Scene& scene) {
       first_touch_height(X, m.indenter_start[0], m.indenter_start[1], m.indenter_radius, surface);
   if (!std::isfinite(first_contact))
     throw SceneError(scene.source, "/indenter/position", "the indenter is not above the body");
-  // Indentation is measured from the sphere touching the undeformed surface (physics.md §2);
+  // Indentation is measured from the sphere touching the undeformed surface (docs/physics.md §2);
   // the sphere starts resting on the particles, which may already be below that by the
   // strain-free sinking between them.
   m.touch_height = surface + m.indenter_radius;

@@ -1,5 +1,5 @@
 #pragma once
-// Consistent nodal integration of the MLS solid (physics.md §6).
+// Consistent nodal integration of the MLS solid (docs/physics.md §1, "Consistent integration"; measured in §6).
 //
 // Nodal integration evaluates the strain energy at the particles with the MLS
 // gradient weights g_ij (d_j of particle i for a neighbour j, A-8; g_ii = d_i =

@@ -1,6 +1,6 @@
 #pragma once
 // Frictionless unilateral contact between the rigid sphere indenter and the
-// particles, with Lagrange multipliers (physics.md §2).
+// particles, with Lagrange multipliers (docs/physics.md §2).
 //
 // After the integrator's free motion (no contact forces), two projections:
 // 1. Positions. The gaps g_i = |x_i - c| - R of the candidate particles (negative

@@ -1,5 +1,5 @@
 #pragma once
-// Hertz theory for a rigid sphere on an elastic half-space (physics.md §3) and
+// Hertz theory for a rigid sphere on an elastic half-space (docs/physics.md §3) and
 // the finite bonded-layer correction of Dimitriadis et al. (2002).
 namespace palpate::hertz {
 

@@ -1,5 +1,5 @@
 #pragma once
-// Hexahedral finite elements (physics.md §5): 8-node trilinear bricks on the
+// Hexahedral finite elements (docs/physics.md §5): 8-node trilinear bricks on the
 // lattice of the scene's box, 2x2x2 Gauss integration, isotropic linear
 // elasticity, in a linear small-strain and a corotational variant (the
 // "large" method of SOFA's HexahedronFEMForceField: the element rotation is

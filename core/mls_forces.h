@@ -38,7 +38,7 @@ void mls_force_differential(const Model& model, const std::vector<double>& tange
 double mls_internal_forces_flops(const Model& model);
 
 namespace detail {
-// Whether internal_forces and force_differential take the vectorised loops over
+// Whether mls_internal_forces and mls_force_differential take the vectorised loops over
 // Model::blocks (true) or the per-particle reference loops (hourglass control on, or a
 // Model without blocks). For tests: a copy of a Model with its blocks cleared runs the
 // reference loops on the same support domains, weights and volumes.

@@ -1,7 +1,7 @@
 #pragma once
 // Scene description: plain structs filled from a JSON scene file
 // (docs/scene-format.md lists every field). The defaults are the paper's set-up
-// (physics.md §4 of the shared reference) except where a default must be neutral
+// (docs/physics.md §4) except where a default must be neutral
 // (no damping, no gravity, kernel volumes); scenes/hertz_cube.json writes the
 // verification set-up out in full. Only what a scene names is built and computed.
 #include <cstdint>
@@ -85,7 +85,7 @@ struct MlsSpec {
   double regularization = 1e-6;  // relative eigenvalue floor of the moment matrix
 };
 
-// The hexahedral FEM reference model (model "hex_fem", physics.md §5).
+// The hexahedral FEM reference model (model "hex_fem", docs/physics.md §5).
 enum class HexFormulation { linear, corotational };
 // Quadrature of the volumetric (lambda) part of K_e: 2x2x2 Gauss points like the
 // rest ("full"), or one point at the centre ("reduced": selective reduced
@@ -137,7 +137,7 @@ struct HealthSpec {
   int inversion_sweep_ticks = 64;    // MLS: det F is checked for n / this particles per step
 };
 
-// When a quasi-static run (palpate-verify) calls the state "at rest" (physics.md §2).
+// When a quasi-static run (palpate-verify) calls the state "at rest" (docs/physics.md §2).
 struct RestSpec {
   double velocity_tolerance = 1e-4;  // m/s, max particle and indenter speed
   double force_tolerance = 1e-3;     // relative |contact force - command| / command

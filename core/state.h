@@ -81,7 +81,7 @@ struct CarriedState {
   // carries these forces as external forces (integrators.h).
   std::vector<int> contact_index;          // particles in contact (normal force > 0)
   std::vector<double> contact_normal_force;  // mu_i >= 0, N: the velocity-level multiplier of
-                                             // particle contact_index[c] (momentum / dt, physics.md §2)
+                                             // particle contact_index[c] (momentum / dt, docs/physics.md §2)
   Points contact_force;                    // 3 x (capacity n): force on particle contact_index[c], N
   double indenter_contact_force = 0.0;     // z force of the body on the indenter, N (positive up)
 

@@ -1,5 +1,5 @@
 #pragma once
-// The stable time step of the integrators (physics.md §1, "Time step"):
+// The stable time step of the integrators (docs/physics.md §1, "Time step"):
 // dt_max = c * dx_min / c_p, with dx_min the smallest particle spacing (FEM: element
 // edge) and c_p = sqrt((lambda + 2 mu + k_v) / rho) the p-wave speed (the volume
 // term stiffens the dilatational wave). c was measured by bisection

@@ -33,13 +33,13 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 OUT = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "docs" / "verification"
 SCENE = json.loads((ROOT / "scenes" / "hertz_cube.json").read_text())
-# The finite-block reference of the default scene (palpate-reference; physics.md §3).
+# The finite-block reference of the default scene (palpate-reference; docs/physics.md §3).
 REFERENCE = json.loads((ROOT / "scenes" / "references" / "hertz_cube.json").read_text())
-# The paper's per-step times (Aras et al., Core i5 2.67 GHz, physics.md §4), ms.
+# The paper's per-step times (Aras et al., Core i5 2.67 GHz, docs/physics.md §4), ms.
 PAPER_MESHLESS_MS, PAPER_SOFA_HEX_MS = 20.11, 195.0
 
 # ---------------------------------------------------------------------------
-# Hertz references (the same formulas as core/hertz.cpp, physics.md §3)
+# Hertz references (the same formulas as core/hertz.cpp, docs/physics.md §3)
 # ---------------------------------------------------------------------------
 E = SCENE["material"]["young_modulus"]
 NU = SCENE["material"]["poisson_ratio"]

@@ -1,4 +1,4 @@
-// Hertz theory and the finite-layer correction (physics.md §3).
+// Hertz theory and the finite-layer correction (docs/physics.md §3).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -21,7 +21,7 @@ TEST(Hertz, ForceDepthAndContactRadius) {
 }
 
 TEST(Hertz, FiniteLayerFactorMatchesDimitriadisFigures) {
-  // physics.md §3: about +5 % at a/L = 0.05, +10 % at 0.1, +21 % at 0.2 for nu = 0.3;
+  // docs/physics.md §3: about +5 % at a/L = 0.05, +10 % at 0.1, +21 % at 0.2 for nu = 0.3;
   // to first order 1 + 0.88 a/L.
   EXPECT_DOUBLE_EQ(hertz::finite_layer_factor(0.0, 0.3), 1.0);
   EXPECT_NEAR(hertz::finite_layer_factor(0.05, 0.3), 1.05, 0.006);
@@ -40,7 +40,7 @@ TEST(Hertz, FiniteLayerDepthInvertsTheForce) {
     EXPECT_NEAR(hertz::force_finite_layer(d, R, E, nu, L), F, 1e-9 * F);
     EXPECT_LT(d, hertz::depth(F, R, hertz::effective_modulus(E, nu)));  // the layer is stiffer
   }
-  // In the default scene the correction is +3 ... +11 % in force (physics.md §3).
+  // In the default scene the correction is +3 ... +11 % in force (docs/physics.md §3).
   const double Es = hertz::effective_modulus(E, nu);
   EXPECT_NEAR(hertz::force_finite_layer(0.01, R, E, nu, L) / hertz::force(0.01, R, Es), 1.03, 0.01);
   EXPECT_NEAR(hertz::force_finite_layer(0.1, R, E, nu, L) / hertz::force(0.1, R, Es), 1.11, 0.015);

@@ -1,4 +1,4 @@
-// Hertz verification on coarse clouds of the default scene (physics.md §3, §4).
+// Hertz verification on coarse clouds of the default scene (docs/physics.md §3, §4).
 //
 // Tolerance. The reference is Hertz corrected for the finite layer (Dimitriadis
 // et al., bottom fixed at depth L = 2 m); the fixed side faces (not in the
@@ -87,7 +87,7 @@ namespace {
 // Issue #6: a lattice graded toward the contact (scenes/hertz_cube_graded.json: k-th
 // distance supports, consistent integration) beats the uniform lattice of the same
 // particle count at the small forces, where a uniform cloud hits its resolution floor
-// (physics.md §6). Both 11^3 = 1331 particles; truth: the finite-layer Hertz depth.
+// (docs/physics.md §6). Both 11^3 = 1331 particles; truth: the finite-layer Hertz depth.
 TEST(HertzVerification, GradedCloudBeatsTheUniformOneAtEqualParticleCount) {
   const std::vector<double> forces = {10.36, 29.30, 53.83};
   auto l2_error = [&](const std::string& file, const SceneOverrides& overrides) {

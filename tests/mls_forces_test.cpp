@@ -175,7 +175,7 @@ TEST(MlsSolid, InternalForcesSumToZeroAndExertNoTorque) {
 TEST(MlsSolid, HomogeneousStretchLeavesInteriorParticlesInEquilibriumOnALattice) {
   // Patch test on the regular lattice with the paper's support (k = 16, alpha = 1:
   // the six face neighbours weighted) and lattice volumes. It holds there by
-  // symmetry (physics.md §6) for particles whose neighbours' stencils are all
+  // symmetry (docs/physics.md §6) for particles whose neighbours' stencils are all
   // complete, i.e. at least two spacings inside the box.
   const Model m = test::model_from_json(
       R"({"body": {"box": {"min": [0,0,0], "max": [1,1,1]}, "distribution": {"type": "grid", "per_edge": 9}},
@@ -406,17 +406,17 @@ TEST(MlsSolid, BlockedLoopsMatchThePerParticleLoopsWithPaddingLanes) {
         for (int i = 0; i < n; ++i) x.col(i) = Q * stretch * m.rest_position.col(i) + noise.col(i);
         // (a) The forces (A-10, A-11).
         Points f(3, n), f_reference(3, n);
-        internal_forces(m, x, f);
-        internal_forces(reference, x, f_reference);
+        mls_internal_forces(m, x, f);
+        mls_internal_forces(reference, x, f_reference);
         const double force_difference = (f - f_reference).cwiseAbs().maxCoeff() / f_reference.cwiseAbs().maxCoeff();
         EXPECT_LT(force_difference, 1e-12);
         // (b) The force differential df = (df/dx) dx at x (the linearisation is shared).
         std::vector<double> F, S;
-        linearize_forces(m, x, F, S);
+        mls_linearize(m, x, F, S);
         const Points dx = random_displacement(m, spacing, 33);
         Points df(3, n), df_reference(3, n);
-        force_differential(m, F, S, dx, df);
-        force_differential(reference, F, S, dx, df_reference);
+        mls_force_differential(m, F, S, dx, df);
+        mls_force_differential(reference, F, S, dx, df_reference);
         const double differential_difference =
             (df - df_reference).cwiseAbs().maxCoeff() / df_reference.cwiseAbs().maxCoeff();
         EXPECT_LT(differential_difference, 1e-12);

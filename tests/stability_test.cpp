@@ -1,6 +1,6 @@
 // Stability tests with independent truths (issue #7, docs/stability.md): each one
 // fails when the mechanism it is about is switched off where it matters.
-//  - The paper's steps (physics.md §4) are stable by analysis/stability.h's definition.
+//  - The paper's steps (docs/physics.md §4) are stable by analysis/stability.h's definition.
 //  - Hourglass control: the checkerboard, a zero-energy mode of nodal integration,
 //    costs exactly its smooth envelope's energy without it (the hex FEM, which sees
 //    the checkerboard's strain, costs several times more) and more with it.
@@ -31,7 +31,7 @@ Scene default_scene(SceneOverrides set) {
 }
 
 TEST(StabilityTest, PapersStepsAreStable) {
-  // physics.md §4: explicit 1 ms for the meshless model, implicit 10 ms for the FEM (10^3 here).
+  // docs/physics.md §4: explicit 1 ms for the meshless model, implicit 10 ms for the FEM (10^3 here).
   stability::TrialSpec trial;
   trial.force = 327.6;
   auto with_integrator = [](const Scene& scene, IntegratorType type, double dt, double damping) {

@@ -125,7 +125,7 @@ TEST(Richardson, RecoversOrderAndLimitOfASyntheticSequence) {
 
 // The graded FEM converges toward its refined reference: the sweep's L2 error falls
 // level by level (about 20 s), and the reference lies in the band the finite-layer
-// Hertz solution allows (physics.md §3): fixed side walls make the block stiffer
+// Hertz solution allows (docs/physics.md §3): fixed side walls make the block stiffer
 // (shallower) than the layer by a few per cent, the sphere against Hertz's paraboloid
 // makes it deeper by at most ~1.3 % at d/R = 0.2.
 // The reference is a static solve: the scene's integrator and dt play no part, so a

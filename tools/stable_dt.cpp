@@ -1,5 +1,5 @@
 // palpate-stable-dt: the largest stable time step of a scene's integrator, found
-// by bisection on trial runs under a constant commanded force (physics.md §1,
+// by bisection on trial runs under a constant commanded force (docs/physics.md §1,
 // "Time step": measure the real limit and compare it with 0.3 dx_min / c_p).
 #include <algorithm>
 #include <chrono>

@@ -1,6 +1,6 @@
 // palpate-verify: presses the scene's indenter with each force of a sweep, lets
-// the body come to rest (physics.md §2) and compares the indentation with Hertz
-// theory, plain and corrected for the finite layer (physics.md §3).
+// the body come to rest (docs/physics.md §2) and compares the indentation with Hertz
+// theory, plain and corrected for the finite layer (docs/physics.md §3).
 #include <chrono>
 #include <filesystem>
 #include <memory>
