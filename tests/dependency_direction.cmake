@@ -1,0 +1,62 @@
+# The direction of the dependencies between the project's folders, checked on the
+# includes of every source (ctest: dependency_direction). The CMake targets link the
+# same way (CMakeLists.txt); this catches an include the link graph would let pass
+# (every target has the source root on its include path).
+#
+#   core <- analysis <- tools          protocol <- server, clients, bench
+#   cli: the argument helper, includable from every program
+#
+# Run: cmake -DSOURCE_DIR=<repo> -P tests/dependency_direction.cmake
+cmake_minimum_required(VERSION 3.25)
+if(NOT SOURCE_DIR)
+  message(FATAL_ERROR "usage: cmake -DSOURCE_DIR=<repository> -P dependency_direction.cmake")
+endif()
+
+# Project folders each folder may include (besides itself).
+set(allowed_core "")
+set(allowed_analysis "core")
+set(allowed_cli "")
+set(allowed_protocol "core")  # scene_wire: wire scenes through core's scene reader
+set(allowed_server "core;protocol;cli")
+set(allowed_clients "core;protocol;cli")
+set(allowed_tools "core;analysis;cli")
+set(allowed_bench "core;analysis;protocol;cli")
+set(project_folders core analysis cli protocol server clients tools bench tests fuzz)
+
+# System headers a folder must not include: the real-time core has no networking,
+# threads or sparse direct solver; the local tools and the analysis no networking;
+# the networked programs no solver.
+set(forbidden_core "capnp/;kj/;cholmod;Eigen/CholmodSupport;thread>;mutex>;condition_variable>")
+set(forbidden_analysis "capnp/;kj/")
+set(forbidden_tools "capnp/;kj/")
+set(forbidden_protocol "cholmod;Eigen/CholmodSupport")
+set(forbidden_server "cholmod;Eigen/CholmodSupport")
+set(forbidden_clients "cholmod;Eigen/CholmodSupport")
+
+set(violations "")
+foreach(folder core analysis cli protocol server clients tools bench)
+  file(GLOB_RECURSE sources "${SOURCE_DIR}/${folder}/*.h" "${SOURCE_DIR}/${folder}/*.cpp")
+  foreach(source ${sources})
+    file(STRINGS "${source}" includes REGEX "^[ \t]*#[ \t]*include")
+    file(RELATIVE_PATH name "${SOURCE_DIR}" "${source}")
+    foreach(line ${includes})
+      if(line MATCHES "#[ \t]*include[ \t]*\"([a-z_]+)/")
+        set(target "${CMAKE_MATCH_1}")
+        if(NOT target STREQUAL folder AND target IN_LIST project_folders AND NOT target IN_LIST allowed_${folder})
+          string(APPEND violations "  ${name}: ${line}   (${folder}/ may include: ${folder} ${allowed_${folder}})\n")
+        endif()
+      endif()
+      foreach(banned ${forbidden_${folder}})
+        string(FIND "${line}" "${banned}" at)
+        if(at GREATER -1)
+          string(APPEND violations "  ${name}: ${line}   (${folder}/ must not include ${banned})\n")
+        endif()
+      endforeach()
+    endforeach()
+  endforeach()
+endforeach()
+
+if(violations)
+  message(FATAL_ERROR "includes against the dependency direction:\n${violations}")
+endif()
+message(STATUS "dependency direction: every include of core, analysis, cli, protocol, server, clients, tools and bench agrees")
