@@ -1,7 +1,7 @@
 #pragma once
 // Scene description: plain structs filled from a JSON scene file
 // (docs/scene-format.md lists every field). The defaults are the paper's set-up
-// (physics.md §4 of the shared reference) except where a default must be neutral
+// (docs/physics.md §4) except where a default must be neutral
 // (no damping, no gravity, kernel volumes); scenes/hertz_cube.json writes the
 // verification set-up out in full. Only what a scene names is built and computed.
 #include <cstdint>
@@ -60,7 +60,7 @@ struct BoxSpec {
 
 struct DistributionSpec {
   DistributionType type = DistributionType::grid;
-  int per_edge = 18;          // nodes per box edge (grid, jittered_grid) when spacing == 0
+  int per_edge = 18;          // nodes per box edge (lattice types) when spacing == 0
   double spacing = 0.0;       // m; > 0 chooses the lattice by spacing instead of per_edge
   double jitter = 0.3;        // jittered_grid: displacement bound as a fraction of the spacing
   double first_spacing = 0.025;  // graded_grid: the lattice spacing next to the focus, m
@@ -85,7 +85,7 @@ struct MlsSpec {
   double regularization = 1e-6;  // relative eigenvalue floor of the moment matrix
 };
 
-// The hexahedral FEM reference model (model "hex_fem", physics.md §5).
+// The hexahedral FEM reference model (model "hex_fem", docs/physics.md §5).
 enum class HexFormulation { linear, corotational };
 // Quadrature of the volumetric (lambda) part of K_e: 2x2x2 Gauss points like the
 // rest ("full"), or one point at the centre ("reduced": selective reduced
@@ -137,7 +137,7 @@ struct HealthSpec {
   int inversion_sweep_ticks = 64;    // MLS: det F is checked for n / this particles per step
 };
 
-// When a quasi-static run (palpate-verify) calls the state "at rest" (physics.md §2).
+// When a quasi-static run (palpate-verify) calls the state "at rest" (docs/physics.md §2).
 struct RestSpec {
   double velocity_tolerance = 1e-4;  // m/s, max particle and indenter speed
   double force_tolerance = 1e-3;     // relative |contact force - command| / command
@@ -178,9 +178,18 @@ Scene load_scene(const std::filesystem::path& file, const SceneOverrides& overri
 Scene parse_scene(const std::string& json_text, const std::string& source_name,
                   const std::filesystem::path& base_dir, const SceneOverrides& overrides = {});
 
+// The JSON pointer of every field a scene file may set ("/body/distribution/per_edge"),
+// in the order the reader checks them (the order of docs/scene-format.md).
+std::vector<std::string> scene_field_paths();
+
+// The scene-file names of enumerated values ("symplectic_euler").
 const char* to_string(IntegratorType);
 const char* to_string(MaterialLaw);
 const char* to_string(HexFormulation);
+const char* to_string(HexVolumetricIntegration);
 const char* to_string(DistributionType);
+const char* to_string(SupportRule);
+const char* to_string(IntegrationRule);
+const char* to_string(VolumeRule);
 
 }  // namespace palpate
