@@ -14,9 +14,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <initializer_list>
 #include <limits>
 #include <memory>
+#include <span>
 #include <string_view>
 #include <system_error>
 
@@ -93,6 +93,57 @@ constexpr Named<uint32_t> kFaces[] = {
     {"bottom", face_bottom}, {"top", face_top},     {"x_min", face_x_min}, {"x_max", face_x_max},
     {"y_min", face_y_min},   {"y_max", face_y_max}, {"sides", faces_sides},
 };
+
+// ---------------------------------------------------------------------------
+// The keys of every object of a scene file, in document order: the one list the
+// reader checks keys against and scene_field_paths() reports.
+
+constexpr std::string_view kSceneKeys[] = {"name",     "model",   "body",       "mls",     "hex_fem",
+                                           "material", "fixed",   "indenter",   "contact", "integrator",
+                                           "gravity",  "verify",  "health"};
+constexpr std::string_view kBodyKeys[] = {"box", "distribution"};
+constexpr std::string_view kBoxKeys[] = {"min", "max"};
+constexpr std::string_view kDistributionKeys[] = {"type",          "per_edge", "spacing",   "jitter", "seed",
+                                                  "first_spacing", "focus",    "node_file", "file"};
+constexpr std::string_view kMlsKeys[] = {"neighbors",   "max_neighbors", "support_factor", "support_rule",
+                                         "integration", "volumes",       "hourglass",      "regularization"};
+constexpr std::string_view kHexFemKeys[] = {"formulation", "volumetric_integration"};
+constexpr std::string_view kMaterialKeys[] = {"young_modulus", "poisson_ratio", "density", "volume_stiffness", "law"};
+constexpr std::string_view kIndenterKeys[] = {"radius", "mass", "position", "force"};
+constexpr std::string_view kContactKeys[] = {"tolerance", "max_iterations"};
+constexpr std::string_view kIntegratorKeys[] = {"type",         "dt", "damping", "cg_tolerance", "cg_max_iterations",
+                                                "allow_unstable_dt"};
+constexpr std::string_view kVerifyKeys[] = {"forces", "rest"};
+constexpr std::string_view kRestKeys[] = {"velocity_tolerance", "force_tolerance", "window", "max_time"};
+constexpr std::string_view kHealthKeys[] = {"enabled", "energy_factor", "max_indenter_speed", "max_penetration",
+                                            "inversion_sweep_ticks"};
+
+// The objects of a scene file by JSON pointer; every other key is a field.
+struct Section {
+  std::string_view pointer;
+  std::span<const std::string_view> keys;
+};
+constexpr Section kSections[] = {
+    {"", kSceneKeys},           {"/body", kBodyKeys},         {"/body/box", kBoxKeys},
+    {"/body/distribution", kDistributionKeys},                {"/mls", kMlsKeys},
+    {"/hex_fem", kHexFemKeys},  {"/material", kMaterialKeys}, {"/indenter", kIndenterKeys},
+    {"/contact", kContactKeys}, {"/integrator", kIntegratorKeys},
+    {"/verify", kVerifyKeys},   {"/verify/rest", kRestKeys},  {"/health", kHealthKeys},
+};
+
+const Section* section_at(std::string_view pointer) {
+  for (const Section& s : kSections)
+    if (s.pointer == pointer) return &s;
+  return nullptr;
+}
+
+void add_field_paths(const Section& section, std::vector<std::string>& out) {
+  for (std::string_view key : section.keys) {
+    const std::string path = std::string(section.pointer) + "/" + std::string(key);
+    if (const Section* child = section_at(path)) add_field_paths(*child, out);
+    else out.push_back(path);
+  }
+}
 
 std::string_view name_of(std::string_view s) { return s; }
 template <class T>
@@ -229,7 +280,7 @@ class Reader {
   }
 
   // Requires an object whose keys are all in `known`.
-  void object(std::initializer_list<std::string_view> known) const {
+  void object(std::span<const std::string_view> known) const {
     if (!present()) return;
     if (!value_->is_object()) fail("expected an object, got " + describe(*value_));
     for (const auto& item : value_->items()) {
@@ -334,7 +385,7 @@ class Reader {
 // Sections, in document order.
 
 void read_box(const Reader& r, BoxSpec& box) {
-  r.object({"min", "max"});
+  r.object(kBoxKeys);
   r["min"].get(box.min);
   r["max"].get(box.max);
   constexpr char kAxis[] = "xyz";
@@ -366,7 +417,7 @@ void require_file(const Reader& r, const std::string& what, const std::string& n
 }
 
 void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base_dir, DistributionSpec& d) {
-  r.object({"type", "per_edge", "spacing", "jitter", "seed", "first_spacing", "focus", "node_file", "file"});
+  r.object(kDistributionKeys);
   r["type"].get(d.type, "distribution type", kDistributions);
   r["per_edge"].get(d.per_edge, 2, 200);
   r["spacing"].get(d.spacing, at_least(0.0));
@@ -437,13 +488,13 @@ void check_graded_grid(const Reader& r, const Scene& s) {
 }
 
 void read_body(const Reader& r, const fs::path& base_dir, Scene& s) {
-  r.object({"box", "distribution"});
+  r.object(kBodyKeys);
   read_box(r["box"], s.box);
   read_distribution(r["distribution"], s.box, base_dir, s.distribution);
 }
 
 void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
-  r.object({"neighbors", "max_neighbors", "support_factor", "support_rule", "integration", "volumes", "hourglass", "regularization"});
+  r.object(kMlsKeys);
   r["neighbors"].get(m.neighbors, 4, 64);
   r["max_neighbors"].get(m.max_neighbors, 0, 128);
   if (m.max_neighbors != 0 && m.max_neighbors < m.neighbors)
@@ -471,18 +522,18 @@ void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
 }
 
 void read_hex_fem(const Reader& r, HexFemSpec& h) {
-  r.object({"formulation", "volumetric_integration"});
+  r.object(kHexFemKeys);
   r["formulation"].get(h.formulation, "formulation", kHexFormulations);
   r["volumetric_integration"].get(h.volumetric_integration, "volumetric integration", kHexVolumetricIntegrations);
 }
 
 void read_material(const Reader& r, MaterialSpec& m) {
-  r.object({"young_modulus", "poisson_ratio", "density", "volume_stiffness", "law"});
-  r["law"].get(m.law, "material law", kMaterialLaws);
+  r.object(kMaterialKeys);
   r["young_modulus"].get(m.young_modulus, open_closed(0.0, 1e12));
   r["poisson_ratio"].get(m.poisson_ratio, open(-1.0, 0.5));
   r["density"].get(m.density, open_closed(0.0, 1e5));
   r["volume_stiffness"].get(m.volume_stiffness, closed(0.0, 1e12));
+  r["law"].get(m.law, "material law", kMaterialLaws);
 }
 
 void read_fixed(const Reader& r, uint32_t& faces) {
@@ -493,7 +544,7 @@ void read_fixed(const Reader& r, uint32_t& faces) {
 }
 
 void read_indenter(const Reader& r, IndenterSpec& ind) {
-  r.object({"radius", "mass", "position", "force"});
+  r.object(kIndenterKeys);
   r["radius"].get(ind.radius, open_closed(0.0, 1e3));
   r["mass"].get(ind.mass, open_closed(0.0, 1e6));
   r["position"].get(ind.position);
@@ -502,13 +553,13 @@ void read_indenter(const Reader& r, IndenterSpec& ind) {
 }
 
 void read_contact(const Reader& r, ContactSpec& c) {
-  r.object({"tolerance", "max_iterations"});
+  r.object(kContactKeys);
   r["tolerance"].get(c.tolerance, open_closed(0.0, 1.0));
   r["max_iterations"].get(c.max_iterations, 1, 1000000);
 }
 
 void read_integrator(const Reader& r, IntegratorSpec& in) {
-  r.object({"type", "dt", "damping", "cg_tolerance", "cg_max_iterations", "allow_unstable_dt"});
+  r.object(kIntegratorKeys);
   r["type"].get(in.type, "integrator", kIntegrators);
   r["dt"].get(in.dt, open_closed(0.0, 1.0));
   r["damping"].get(in.damping, closed(0.0, 1e6));
@@ -518,7 +569,7 @@ void read_integrator(const Reader& r, IntegratorSpec& in) {
 }
 
 void read_health(const Reader& r, HealthSpec& h) {
-  r.object({"enabled", "energy_factor", "max_indenter_speed", "max_penetration", "inversion_sweep_ticks"});
+  r.object(kHealthKeys);
   r["enabled"].get(h.enabled);
   r["energy_factor"].get(h.energy_factor, closed_open(1.0, kInf));
   r["max_indenter_speed"].get(h.max_indenter_speed, closed_open(0.0, kInf));
@@ -532,7 +583,7 @@ void read_gravity(const Reader& r, Vec3& g) {
 }
 
 void read_verify(const Reader& r, VerifySpec& v) {
-  r.object({"forces", "rest"});
+  r.object(kVerifyKeys);
   if (const Reader forces = r["forces"]; forces.present()) {
     v.forces.clear();
     for (const Reader& e : forces.elements("an array of forces in N")) {
@@ -542,7 +593,7 @@ void read_verify(const Reader& r, VerifySpec& v) {
     }
   }
   const Reader rest = r["rest"];
-  rest.object({"velocity_tolerance", "force_tolerance", "window", "max_time"});
+  rest.object(kRestKeys);
   rest["velocity_tolerance"].get(v.rest.velocity_tolerance, positive());
   rest["force_tolerance"].get(v.rest.force_tolerance, positive());
   rest["window"].get(v.rest.window, positive());
@@ -550,8 +601,7 @@ void read_verify(const Reader& r, VerifySpec& v) {
 }
 
 void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
-  r.object({"name", "model", "body", "mls", "hex_fem", "material", "fixed", "indenter", "contact", "integrator",
-            "gravity", "verify", "health"});
+  r.object(kSceneKeys);
   r["name"].get(s.name);
   if (const auto* m = r["model"].pick("model", kModels)) s.model = *m;
   read_body(r["body"], base_dir, s);
@@ -693,9 +743,19 @@ Scene load_scene(const fs::path& file, const SceneOverrides& overrides) {
   return parse_scene(text, source, file.parent_path(), overrides);
 }
 
+std::vector<std::string> scene_field_paths() {
+  std::vector<std::string> paths;
+  add_field_paths(*section_at(""), paths);
+  return paths;
+}
+
 const char* to_string(IntegratorType t) { return name_for(kIntegrators, t); }
 const char* to_string(MaterialLaw l) { return name_for(kMaterialLaws, l); }
 const char* to_string(HexFormulation f) { return name_for(kHexFormulations, f); }
 const char* to_string(DistributionType t) { return name_for(kDistributions, t); }
+const char* to_string(HexVolumetricIntegration v) { return name_for(kHexVolumetricIntegrations, v); }
+const char* to_string(SupportRule r) { return name_for(kSupportRules, r); }
+const char* to_string(IntegrationRule r) { return name_for(kIntegrationRules, r); }
+const char* to_string(VolumeRule r) { return name_for(kVolumeRules, r); }
 
 }  // namespace palpate

@@ -60,7 +60,7 @@ struct BoxSpec {
 
 struct DistributionSpec {
   DistributionType type = DistributionType::grid;
-  int per_edge = 18;          // nodes per box edge (grid, jittered_grid) when spacing == 0
+  int per_edge = 18;          // nodes per box edge (lattice types) when spacing == 0
   double spacing = 0.0;       // m; > 0 chooses the lattice by spacing instead of per_edge
   double jitter = 0.3;        // jittered_grid: displacement bound as a fraction of the spacing
   double first_spacing = 0.025;  // graded_grid: the lattice spacing next to the focus, m
@@ -178,9 +178,18 @@ Scene load_scene(const std::filesystem::path& file, const SceneOverrides& overri
 Scene parse_scene(const std::string& json_text, const std::string& source_name,
                   const std::filesystem::path& base_dir, const SceneOverrides& overrides = {});
 
+// The JSON pointer of every field a scene file may set ("/body/distribution/per_edge"),
+// in the order the reader checks them (the order of docs/scene-format.md).
+std::vector<std::string> scene_field_paths();
+
+// The scene-file names of enumerated values ("symplectic_euler").
 const char* to_string(IntegratorType);
 const char* to_string(MaterialLaw);
 const char* to_string(HexFormulation);
+const char* to_string(HexVolumetricIntegration);
 const char* to_string(DistributionType);
+const char* to_string(SupportRule);
+const char* to_string(IntegrationRule);
+const char* to_string(VolumeRule);
 
 }  // namespace palpate

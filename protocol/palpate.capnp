@@ -24,7 +24,10 @@ const protocolVersion :UInt32 = 1;
 # fields that differ from the defaults below, and the lists that are set) and
 # validates it with the file validator, so a wire scene and a file behave the
 # same and errors name the JSON pointer of the field. Every default below equals
-# the file format's default; a null list means "absent" (the file default).
+# the file format's default; a null list means "absent" (the file default). A
+# numeric field's comment writes its range before the first ';'. Defaults and
+# ranges are checked against the file reader and docs/scene-format.md by
+# tests/scene_schema_test.cpp.
 
 enum DistributionType {
   grid @0;
@@ -76,11 +79,11 @@ struct Box {
 struct Distribution {
   type @0 :DistributionType = grid;
   perEdge @1 :Int32 = 18 $Json.name("per_edge");       # [2, 200], used when spacing == 0
-  spacing @2 :Float64 = 0;                             # m, > 0 chooses the lattice by spacing
+  spacing @2 :Float64 = 0;                             # m, >= 0; > 0 chooses the lattice by spacing
   jitter @3 :Float64 = 0.3;                            # [0, 0.5), fraction of the spacing
   seed @4 :UInt32 = 1;                                 # jittered_grid (the wire carries 32 bits)
   nodeFile @5 :Text $Json.name("node_file");           # path on the server, relative to --scene-dir
-  firstSpacing @6 :Float64 = 0.025 $Json.name("first_spacing");  # graded_grid: spacing at the focus, m
+  firstSpacing @6 :Float64 = 0.025 $Json.name("first_spacing");  # m, > 0; graded_grid: the spacing at the focus
   focus @7 :List(Float64);                             # graded_grid: [x, y, z], m; null = top face under the indenter
   file @8 :Text;                                       # mesh: .msh (gmsh) or .node (+ .ele, TetGen) on the server,
                                                        # relative to --scene-dir
@@ -97,7 +100,7 @@ struct Mls {
   regularization @4 :Float64 = 1e-6;                          # [0, 1)
   supportRule @5 :SupportRule = meanDistance $Json.name("support_rule");
   integration @6 :IntegrationRule = nodal;
-  maxNeighbors @7 :Int32 = 0 $Json.name("max_neighbors");    # [0, 128], 0 = k for every particle
+  maxNeighbors @7 :Int32 = 0 $Json.name("max_neighbors");    # 0 or [neighbors, 128]; 0 = k for every particle
 }
 struct HexFem {
   formulation @0 :HexFormulation = linear;
@@ -119,7 +122,7 @@ struct Indenter {
   radius @0 :Float64 = 0.5;        # m, (0, 1000]
   mass @1 :Float64 = 1.0;          # kg, (0, 1e6]
   position @2 :List(Float64);      # [x, y, z] m; null = centred over the top face, just touching
-  force @3 :Float64 = 0;           # N, initial command, pressing down when positive
+  force @3 :Float64 = 0;           # N, [-1e9, 1e9]; initial command, pressing down when positive
 }
 struct Contact {
   tolerance @0 :Float64 = 1e-6;                              # m, (0, 1]
@@ -136,8 +139,8 @@ struct Integrator {
 struct Health {                  # per-step health checks (core/health.h, docs/scene-format.md)
   enabled @0 :Bool = true;
   energyFactor @1 :Float64 = 10 $Json.name("energy_factor");                # [1, inf)
-  maxIndenterSpeed @2 :Float64 = 0 $Json.name("max_indenter_speed");        # m/s, 0 = one spacing per step
-  maxPenetration @3 :Float64 = 0 $Json.name("max_penetration");             # m, 0 = tolerance + 5 % spacing
+  maxIndenterSpeed @2 :Float64 = 0 $Json.name("max_indenter_speed");        # m/s, >= 0; 0 = one spacing per step
+  maxPenetration @3 :Float64 = 0 $Json.name("max_penetration");             # m, >= 0; 0 = tolerance + 5 % spacing
   inversionSweepTicks @4 :Int32 = 64 $Json.name("inversion_sweep_ticks");   # [1, 1e6]
 }
 struct Rest {
@@ -157,7 +160,7 @@ struct Scene {
   mls @3 :Mls;
   hexFem @4 :HexFem $Json.name("hex_fem");
   material @5 :Material;
-  fixed @6 :List(Face);              # null = [bottom, sides]; empty = a free body
+  fixed @6 :List(Face);              # null = ["bottom", "sides"]; empty = a free body
   indenter @7 :Indenter;
   contact @8 :Contact;
   integrator @9 :Integrator;

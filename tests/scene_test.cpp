@@ -145,18 +145,23 @@ TEST(Scene, EveryDocumentedFieldIsAccepted) {
     "body": {
       "box": {"min": [-1,-1,-2], "max": [1,1,0]},
       "distribution": {"type": "jittered_grid", "per_edge": 12, "spacing": 0.25, "jitter": 0.2, "seed": 7,
-                       "node_file": "nodes.txt"}
+                       "first_spacing": 0.05, "focus": [0.5, 0, 0], "node_file": "nodes.txt", "file": "cube.msh"}
     },
-    "mls": {"neighbors": 26, "support_factor": 1.5, "volumes": "lattice", "hourglass": 0.5, "regularization": 1e-4},
-    "material": {"young_modulus": 2e4, "poisson_ratio": 0.45, "density": 1100, "volume_stiffness": 100},
+    "mls": {"neighbors": 26, "max_neighbors": 40, "support_factor": 1.5, "support_rule": "kth_distance",
+            "integration": "consistent", "volumes": "lattice", "hourglass": 0.5, "regularization": 1e-4},
+    "hex_fem": {"formulation": "corotational", "volumetric_integration": "reduced"},
+    "material": {"young_modulus": 2e4, "poisson_ratio": 0.45, "density": 1100, "volume_stiffness": 100,
+                 "law": "corotational"},
     "fixed": ["bottom"],
     "indenter": {"radius": 0.25, "mass": 2.0, "position": [0.1, 0.2, 0.5], "force": 30},
     "contact": {"tolerance": 1e-5, "max_iterations": 50},
     "integrator": {"type": "implicit_euler", "dt": 0.01, "damping": 1.0, "cg_tolerance": 1e-6,
-                   "cg_max_iterations": 500},
+                   "cg_max_iterations": 500, "allow_unstable_dt": true},
     "gravity": [0, 0, -9.81],
     "verify": {"forces": [10, 50], "rest": {"velocity_tolerance": 1e-3, "force_tolerance": 1e-2, "window": 0.1,
-                                            "max_time": 30}}
+                                            "max_time": 30}},
+    "health": {"enabled": false, "energy_factor": 4, "max_indenter_speed": 2, "max_penetration": 0.01,
+               "inversion_sweep_ticks": 8}
   })");
   EXPECT_EQ(s.name, "full");
   EXPECT_EQ(s.distribution.type, DistributionType::jittered_grid);
@@ -164,16 +169,26 @@ TEST(Scene, EveryDocumentedFieldIsAccepted) {
   EXPECT_EQ(s.distribution.spacing, 0.25);
   EXPECT_EQ(s.distribution.jitter, 0.2);
   EXPECT_EQ(s.distribution.seed, 7u);
+  EXPECT_EQ(s.distribution.first_spacing, 0.05);
+  EXPECT_TRUE(s.distribution.focus_given);
+  EXPECT_EQ(s.distribution.focus, Vec3(0.5, 0, 0));
   EXPECT_EQ(s.distribution.node_file.filename(), "nodes.txt");  // kept (resolved), unused by a grid
+  EXPECT_EQ(s.distribution.mesh_file.filename(), "cube.msh");   // likewise
   EXPECT_EQ(s.mls.neighbors, 26);
+  EXPECT_EQ(s.mls.max_neighbors, 40);
   EXPECT_EQ(s.mls.support_factor, 1.5);
+  EXPECT_EQ(s.mls.support_rule, SupportRule::kth_distance);
+  EXPECT_EQ(s.mls.integration, IntegrationRule::consistent);
   EXPECT_EQ(s.mls.volumes, VolumeRule::lattice);
   EXPECT_EQ(s.mls.hourglass, 0.5);
   EXPECT_EQ(s.mls.regularization, 1e-4);
+  EXPECT_EQ(s.hex_fem.formulation, HexFormulation::corotational);
+  EXPECT_EQ(s.hex_fem.volumetric_integration, HexVolumetricIntegration::reduced);
   EXPECT_EQ(s.material.young_modulus, 2e4);
   EXPECT_EQ(s.material.poisson_ratio, 0.45);
   EXPECT_EQ(s.material.density, 1100.0);
   EXPECT_EQ(s.material.volume_stiffness, 100.0);
+  EXPECT_EQ(s.material.law, MaterialLaw::corotational);
   EXPECT_EQ(s.fixed_faces, face_bottom);
   EXPECT_TRUE(s.indenter.position_given);
   EXPECT_EQ(s.indenter.position, Vec3(0.1, 0.2, 0.5));
@@ -187,12 +202,18 @@ TEST(Scene, EveryDocumentedFieldIsAccepted) {
   EXPECT_EQ(s.integrator.damping, 1.0);
   EXPECT_EQ(s.integrator.cg_tolerance, 1e-6);
   EXPECT_EQ(s.integrator.cg_max_iterations, 500);
+  EXPECT_TRUE(s.integrator.allow_unstable_dt);
   EXPECT_EQ(s.gravity, Vec3(0, 0, -9.81));
   EXPECT_EQ(s.verify.forces, (std::vector<double>{10, 50}));
   EXPECT_EQ(s.verify.rest.velocity_tolerance, 1e-3);
   EXPECT_EQ(s.verify.rest.force_tolerance, 1e-2);
   EXPECT_EQ(s.verify.rest.window, 0.1);
   EXPECT_EQ(s.verify.rest.max_time, 30.0);
+  EXPECT_FALSE(s.health.enabled);
+  EXPECT_EQ(s.health.energy_factor, 4.0);
+  EXPECT_EQ(s.health.max_indenter_speed, 2.0);
+  EXPECT_EQ(s.health.max_penetration, 0.01);
+  EXPECT_EQ(s.health.inversion_sweep_ticks, 8);
 }
 
 TEST(Scene, IntegralFloatsAreIntegers) {
@@ -213,6 +234,10 @@ TEST(Scene, ToString) {
   EXPECT_STREQ(to_string(DistributionType::grid), "grid");
   EXPECT_STREQ(to_string(DistributionType::jittered_grid), "jittered_grid");
   EXPECT_STREQ(to_string(DistributionType::node_file), "node_file");
+  EXPECT_STREQ(to_string(SupportRule::kth_distance), "kth_distance");
+  EXPECT_STREQ(to_string(IntegrationRule::consistent), "consistent");
+  EXPECT_STREQ(to_string(VolumeRule::lattice), "lattice");
+  EXPECT_STREQ(to_string(HexVolumetricIntegration::reduced), "reduced");
   // The names read back.
   for (auto t : {IntegratorType::rk4, IntegratorType::symplectic_euler, IntegratorType::implicit_euler})
     EXPECT_EQ(parse(std::string(R"({"integrator": {"type": ")") + to_string(t) + "\"}}").integrator.type, t);
