@@ -12,10 +12,12 @@
 #include <functional>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "cli/arguments.h"
+#include "tools/load_scene.h"
 #include "core/checkpoint.h"
 #include "core/contact.h"
 #include "core/health.h"
@@ -94,16 +96,10 @@ int main(int argc, char** argv) {
     return 2;
   }
 
-  Scene scene;
-  Model model;
-  try {
-    scene = load_scene(scene_file, overrides);
-    model = build_model(scene);
-  } catch (const std::exception& e) {
-    std::cerr << "palpate-bench-step: " << e.what() << "\n";
-    return 1;
-  }
-  const Options scene_options = options_of(scene);
+  std::optional<tools::LoadedScene> loaded = tools::load_scene_and_model("palpate-bench-step", scene_file, overrides);
+  if (!loaded) return 1;
+  const Model& model = loaded->model;
+  const Options& scene_options = loaded->opt;
   const int n = model.particle_count;
   const bool is_mls = model.solid == SolidKind::mls;
   // Neighbour pairs of the MLS supports (the hex FEM has none: its particles are lattice nodes).

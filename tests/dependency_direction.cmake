@@ -20,7 +20,7 @@ set(allowed_protocol "core")  # scene_wire: wire scenes through core's scene rea
 set(allowed_server "core;protocol;cli")
 set(allowed_clients "core;protocol;cli")
 set(allowed_tools "core;analysis;cli")
-set(allowed_bench "core;analysis;protocol;cli")
+set(allowed_bench "core;analysis;protocol;cli;tools")
 set(project_folders core analysis cli protocol server clients tools bench tests fuzz)
 
 # System headers a folder must not include: the real-time core has no networking,

@@ -7,10 +7,12 @@
 #include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "analysis/stability.h"
 #include "cli/arguments.h"
+#include "tools/load_scene.h"
 #include "core/model.h"
 #include "core/scene.h"
 
@@ -60,15 +62,10 @@ int main(int argc, char** argv) {
     return 2;
   }
 
-  Scene scene;
-  Model model;
-  try {
-    scene = load_scene(scene_file, overrides);
-    model = build_model(scene);
-  } catch (const std::exception& e) {
-    std::cerr << "palpate-stable-dt: " << e.what() << "\n";
-    return 1;
-  }
+  std::optional<tools::LoadedScene> loaded = tools::load_scene_and_model("palpate-stable-dt", scene_file, overrides);
+  if (!loaded) return 1;
+  const Scene& scene = loaded->scene;
+  const Model& model = loaded->model;
   if (std::isnan(force)) force = scene.verify.forces.empty() ? 150.0 : scene.verify.forces.back();
   const double dt_estimate = 0.3 * model.min_spacing / model.wave_speed;
   const char* integrator = to_string(scene.integrator.type);
@@ -87,7 +84,7 @@ int main(int argc, char** argv) {
   const std::string definition = stability::definition(trial);
   const auto start = std::chrono::steady_clock::now();
   const stability::Search found =
-      stability::find_stable_dt(model, options_of(scene), trial, search, [&](double dt, const stability::Trial& t) {
+      stability::find_stable_dt(model, loaded->opt, trial, search, [&](double dt, const stability::Trial& t) {
         if (!quiet) std::fprintf(stderr, "  dt = %.4e s: %s (d = %.5f m)\n", dt, t.reason.c_str(), t.final_indentation);
       });
   const double lo = found.dt_max_stable, hi = found.dt_min_unstable;

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "cli/arguments.h"
+#include "tools/load_scene.h"
 #include "core/health.h"
 #include "core/hertz.h"
 #include "core/indentation.h"
@@ -119,15 +120,10 @@ int main(int argc, char** argv) {
   }
   spdlog::set_level(spdlog::level::from_str(log_level));
 
-  Scene scene;
-  Model model;
-  try {
-    scene = load_scene(scene_file, overrides);
-    model = build_model(scene);
-  } catch (const std::exception& e) {
-    std::cerr << "palpate-verify: " << e.what() << "\n";
-    return 1;
-  }
+  std::optional<tools::LoadedScene> loaded = tools::load_scene_and_model("palpate-verify", scene_file, overrides);
+  if (!loaded) return 1;
+  const Scene& scene = loaded->scene;
+  const Model& model = loaded->model;
 
   const MaterialSpec& mat = scene.material;
   const double R = model.indenter_radius;
@@ -151,7 +147,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "palpate-verify: mesh of %lld tetrahedra (%lld unused nodes dropped)\n",
                  static_cast<long long>(model.mesh_tetrahedra), static_cast<long long>(model.mesh_unused_nodes));
 
-  // The finite-block reference (core/reference.h).
+  // The finite-block reference (analysis/reference.h).
   std::optional<Reference> reference;
   std::string reference_note;
   try {
@@ -165,7 +161,9 @@ int main(int argc, char** argv) {
       reference = finite_cube_reference(scene, forces, {}, [&](const std::string& m) {
         if (!quiet) std::fprintf(stderr, "palpate-verify: %s\n", m.c_str());
       });
-    } else if (reference_choice != "none") {
+    } else if (reference_choice == "none") {
+      reference_note = "none (--reference none)";
+    } else {
       reference = load_reference(reference_choice);
       if (reference->key != reference_key(scene))
         throw std::runtime_error("--reference: " + reference_choice + " is for '" + reference->key +
@@ -177,7 +175,7 @@ int main(int argc, char** argv) {
   }
   if (!quiet && !reference_note.empty()) std::fprintf(stderr, "palpate-verify: %s\n", reference_note.c_str());
 
-  const Options opt = options_of(scene);
+  const Options& opt = loaded->opt;
   State state = make_state(model, opt);
   std::unique_ptr<LinearStaticContact> linear_static;
   if (static_solve && has_linear_static_solve(model)) linear_static = std::make_unique<LinearStaticContact>(model);
@@ -309,14 +307,22 @@ int main(int argc, char** argv) {
                 scene.integrator.dt);
     std::printf("%10s %10s %10s %10s %10s %9s %9s %9s %8s %9s  %s\n", "F [N]", "d_sim [m]", "d_Hertz", "d_layer",
                 "d_ref", "err_H", "err_layer", "err_ref", "steps", "wall [s]", "status");
+    // A value that does not exist (no reference, or a force outside its range) prints "-", never "nan".
+    auto cell = [](double v, const char* format) {
+      char text[32];
+      if (!std::isfinite(v)) return std::string("-");
+      std::snprintf(text, sizeof text, format, v);
+      return std::string(text);
+    };
     for (const Row& r : rows)
-      std::printf("%10.3f %10.5f %10.5f %10.5f %10.5f %8.1f%% %8.1f%% %8.1f%% %8ld %9.2f  %s\n", r.force, r.d_sim,
-                  r.d_hertz, r.d_layer, r.d_ref, 100 * (r.d_sim - r.d_hertz) / r.d_hertz,
-                  100 * (r.d_sim - r.d_layer) / r.d_layer, 100 * (r.d_sim - r.d_ref) / r.d_ref, r.steps,
-                  r.wall_seconds, r.status.c_str());
-    std::printf("L2 error against Hertz: %.2f %%, against finite-layer Hertz: %.2f %%, against the finite-block "
-                "reference: %.2f %%\n",
-                100 * l2_hertz, 100 * l2_layer, 100 * l2_reference);
+      std::printf("%10.3f %10.5f %10.5f %10.5f %10s %8.1f%% %8.1f%% %9s %8ld %9.2f  %s\n", r.force, r.d_sim,
+                  r.d_hertz, r.d_layer, cell(r.d_ref, "%.5f").c_str(), 100 * (r.d_sim - r.d_hertz) / r.d_hertz,
+                  100 * (r.d_sim - r.d_layer) / r.d_layer,
+                  cell(100 * (r.d_sim - r.d_ref) / r.d_ref, "%.1f%%").c_str(), r.steps, r.wall_seconds,
+                  r.status.c_str());
+    std::printf("L2 error against Hertz: %.2f %%, against finite-layer Hertz: %.2f %%", 100 * l2_hertz, 100 * l2_layer);
+    if (std::isfinite(l2_reference)) std::printf(", against the finite-block reference: %.2f %%", 100 * l2_reference);
+    std::printf("\n");
     std::printf("d_ref: %s\n", reference ? ("linear hex FEM, graded, extrapolated (" + reference->key + ")").c_str()
                                          : reference_note.c_str());
   }
