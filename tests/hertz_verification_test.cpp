@@ -134,7 +134,7 @@ TEST(ShippedScenes, EveryOneBuilds) {
 
 // The haptic scene (a 1691-node graded tetrahedralisation, symplectic Euler at 1 ms,
 // fast enough for 1 kHz) against the converged finite-cube reference stored with the
-// scenes (an extrapolated hex FEM, core/reference.h): within 2 % at the ends and the
+// scenes (an extrapolated hex FEM, analysis/reference.h): within 2 % at the ends and the
 // middle of the sweep.
 TEST(HertzVerification, HapticSceneIsWithinTwoPercentOfTheFiniteCubeReference) {
   const std::filesystem::path dir = std::string(PALPATE_SOURCE_DIR) + "/scenes";

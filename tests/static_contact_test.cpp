@@ -1,5 +1,5 @@
-// The quasi-static solve (core/static_contact.h) and the finite-block reference
-// (core/reference.h): Signorini conditions and force balance checked with the
+// The quasi-static solve (analysis/static_contact.h) and the finite-block reference
+// (analysis/reference.h): Signorini conditions and force balance checked with the
 // element-by-element force routine (an independent code path from the assembled,
 // factorised stiffness), agreement with the dynamic settle, Richardson on a
 // synthetic sequence, convergence of the refined FEM, and the reference against

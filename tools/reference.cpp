@@ -1,4 +1,4 @@
-// palpate-reference: the converged finite-block reference of a scene (core/reference.h):
+// palpate-reference: the converged finite-block reference of a scene (analysis/reference.h):
 // the linear hex FEM on graded lattices refined level by level, solved exactly and
 // quasi-statically, with Richardson extrapolation of the indentation at each force.
 #include <cmath>

@@ -73,7 +73,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "palpate-stable-dt: %s, %d particles, %s, F = %g N, %g s per trial\n", scene.name.c_str(),
                  model.particle_count, integrator, force, duration);
 
-  // The trial and the search are bench/stability.h's (shared with palpate-stress).
+  // The trial and the search are analysis/stability.h's (shared with palpate-stress).
   stability::TrialSpec trial;
   trial.force = force;
   trial.duration = duration;
