@@ -1,29 +1,5 @@
-// palpate-bench-server: load benchmark of palpate-server (issue #3).
-//
-//   palpate-bench-server [--json] [--seconds S] [--scene FILE] [--rate HZ] [--viewers N]
-//                        [--connect ADDR:PORT] [--server PATH]
-//
-// Starts palpate-server (next to this executable, on a loopback port the system
-// picks) unless --connect is given, opens one real-time session on the scene
-// (default scenes/hertz_cube.json) at --rate (default 1000 Hz) and attaches:
-//  - one full-rate subscriber (every tick; scalars only: contact force, indenter),
-//    on the connection that sends the commands;
-//  - N (default 4) viewers at 60 Hz with all positions, each on its own connection.
-// Every 50 ms it commands a new force (alternating 20 + k % 10 N) and measures the
-// command-to-stream latency: from sending setForce to receiving the first frame
-// whose commandSeq includes it (the client's clock at both ends). After S seconds
-// (default 30) it reads the session's statistics and prints a table, or with
-// --json one JSON object. The benchmark's own thread asks for SCHED_FIFO 5 (a
-// haptic front-end would run real-time too); "client_fifo" says if it got it.
-//
-// --soak S runs the same measurement for S seconds while a churn thread plays the
-// hostile public (issue #7): it connects, attaches to the session, subscribes at a
-// random rate (some sinks never return: stalled readers), sends valid and hostile
-// commands (NaN, Inf, 1e12 N: each must be refused), writes garbage bytes to the
-// port, and vanishes without unsubscribing, at random, without pause. It adds to
-// the output the server's resident memory after a warm-up and at the end
-// (rss_start_mb, rss_end_mb, sampled every 10 s in rss_samples_mb), the number of
-// recovered blow-ups (recoveries) and what the churn did.
+// palpate-bench-server: load benchmark of palpate-server (issue #3). Usage: kUsage
+// below (palpate-bench-server --help).
 #include <fcntl.h>
 #include <limits.h>
 #include <pthread.h>
@@ -54,6 +30,7 @@
 #include <kj/async-io.h>
 #include <kj/timer.h>
 
+#include "cli/arguments.h"
 #include "protocol/palpate.capnp.h"
 
 namespace {
@@ -63,6 +40,43 @@ using Clock = std::chrono::steady_clock;
 using palpate::wire::FrameSink;
 using palpate::wire::PalpateServer;
 using palpate::wire::Session;
+
+const char* kUsage = R"(usage: palpate-bench-server [options]
+Load benchmark of palpate-server. Starts the server (palpate-server next to this
+executable, on a loopback port the system picks) unless --connect is given, opens one
+real-time session on the scene at --rate and attaches:
+ - one full-rate subscriber (every tick; scalars only: contact force, indenter), on the
+   connection that sends the commands;
+ - --viewers viewers at 60 Hz with all positions, each on its own connection.
+Every 50 ms it commands a new force (alternating 20 + k % 10 N) and measures the
+command-to-stream latency: from sending setForce to receiving the first frame whose
+commandSeq includes it (the client's clock at both ends). After --seconds it reads the
+session's statistics and prints a table, or one JSON object. The benchmark's own
+thread asks for SCHED_FIFO 5 (a haptic front-end would run real-time too);
+"client_fifo" says if it got it.
+--soak S runs the same measurement for S seconds while a churn thread plays the hostile
+public: it connects, attaches to the session, subscribes at a random rate (some sinks
+never return: stalled readers), sends valid and hostile commands (NaN, Inf, 1e12 N:
+each must be refused), writes garbage bytes to the port and vanishes without
+unsubscribing, at random, without pause. The output adds the server's resident memory
+after a warm-up and at the end (rss_start_mb, rss_end_mb, sampled every 10 s in
+rss_samples_mb), the recovered blow-ups (recoveries) and what the churn did.
+  --json               print one JSON object instead of the table
+  --seconds S          measured window, (0, 86400] (default 30)
+  --soak S             soak for S seconds, (0, 86400], with the churn thread (replaces
+                       --seconds)
+  --scene FILE         the scene, served as the server's default scene (default:
+                       scenes/hertz_cube.json of the source tree; ignored with --connect,
+                       where the server's default scene is used)
+  --rate HZ            the session's loop rate, (0, 10000] (default 1000)
+  --viewers N          60 Hz viewers of all positions, [0, 32] (default 4)
+  --connect ADDR:PORT  use this running server instead of starting one
+  --server PATH        the server executable to start (default: palpate-server next to
+                       this executable)
+  --help               print this text and exit
+Exit status: 0 when done; 1 when the server does not start, the connection fails or the
+server refuses; 2 for a wrong argument.
+)";
 
 struct Args {
   bool json = false;
@@ -75,35 +89,28 @@ struct Args {
   std::string server;
 };
 
-[[noreturn]] void usage(const std::string& error) {
-  std::fprintf(stderr,
-               "palpate-bench-server: %s\n"
-               "usage: palpate-bench-server [--json] [--seconds S] [--soak S] [--scene FILE] [--rate HZ]\n"
-               "                            [--viewers N] [--connect ADDR:PORT] [--server PATH]\n",
-               error.c_str());
-  std::exit(2);
-}
-
 Args parse_args(int argc, char** argv) {
   Args a;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) usage(flag + " needs a value");
-      return argv[++i];
-    };
+  auto duration = [](palpate::cli::Arguments& args) {
+    const double s = args.number();
+    if (!(s > 0 && s <= 86400)) throw std::invalid_argument(args.flag() + ": must be in (0, 86400] s");
+    return s;
+  };
+  palpate::cli::parse_or_exit(argc, argv, "palpate-bench-server", kUsage, [&](palpate::cli::Arguments& args) {
+    const std::string& flag = args.flag();
     if (flag == "--json") a.json = true;
-    else if (flag == "--seconds") a.seconds = std::atof(value().c_str());
-    else if (flag == "--soak") a.soak = a.seconds = std::atof(value().c_str());
-    else if (flag == "--scene") a.scene = fs::absolute(value()).string();
-    else if (flag == "--rate") a.rate = std::atof(value().c_str());
-    else if (flag == "--viewers") a.viewers = std::atoi(value().c_str());
-    else if (flag == "--connect") a.connect = value();
-    else if (flag == "--server") a.server = value();
-    else usage("unknown option " + flag);
-  }
-  if (!(a.seconds > 0 && a.seconds <= 86400)) usage("--seconds and --soak must be in (0, 86400]");
-  if (a.viewers < 0 || a.viewers > 32) usage("--viewers must be in [0, 32]");
+    else if (flag == "--seconds") a.seconds = duration(args);
+    else if (flag == "--soak") a.soak = a.seconds = duration(args);
+    else if (flag == "--scene") a.scene = fs::absolute(args.value()).string();
+    else if (flag == "--rate") {
+      a.rate = args.number();
+      if (!(a.rate > 0 && a.rate <= 10000)) throw std::invalid_argument("--rate: must be in (0, 10000] Hz");
+    } else if (flag == "--viewers") a.viewers = static_cast<int>(args.integer(0, 32));
+    else if (flag == "--connect") a.connect = args.value();
+    else if (flag == "--server") a.server = args.value();
+    else return false;
+    return true;
+  });
   return a;
 }
 
@@ -126,7 +133,9 @@ struct ServerChild {
     }
     close(out[1]);
     std::string line;
-    const auto deadline = Clock::now() + std::chrono::seconds(20);
+    // The server validates and builds its default scene before it listens (seconds for
+    // the finer study scenes).
+    const auto deadline = Clock::now() + std::chrono::seconds(120);
     while (line.find('\n') == std::string::npos && Clock::now() < deadline) {
       char buf[256];
       const ssize_t n = read(out[0], buf, sizeof buf);

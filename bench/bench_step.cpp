@@ -57,13 +57,6 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[k] : 0.5 * (v[k - 1] + v[k]);
 }
 
-int positive_int(const std::string& option, const std::string& text) {
-  size_t used = 0;
-  const int v = std::stoi(text, &used);
-  if (used != text.size() || v <= 0) throw std::invalid_argument(option + ": '" + text + "' is not a positive integer");
-  return v;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -79,12 +72,12 @@ int main(int argc, char** argv) {
       if (arg == "--scene") scene_file = value();
       else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
       else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
-      else if (arg == "--repeats") repeats = positive_int(arg, value());
-      else if (arg == "--ie-repeats") ie_repeats = positive_int(arg, value());
-      else if (arg == "--press-steps") press_steps = positive_int(arg, value());
-      else if (arg == "--min-contacts") min_contacts = positive_int(arg, value());
-      else if (arg == "--ie-dt") ie_dt = std::stod(value());
-      else if (arg == "--press-force") press_force = std::stod(value());
+      else if (arg == "--repeats") repeats = static_cast<int>(args.integer(1, 100000000));
+      else if (arg == "--ie-repeats") ie_repeats = static_cast<int>(args.integer(1, 100000000));
+      else if (arg == "--press-steps") press_steps = static_cast<int>(args.integer(1, 100000000));
+      else if (arg == "--min-contacts") min_contacts = static_cast<int>(args.integer(1, 100000000));
+      else if (arg == "--ie-dt") ie_dt = args.number();
+      else if (arg == "--press-force") press_force = args.number();
       else if (arg == "--json") json_out = true;
       else if (arg == "--help" || arg == "-h") {
         std::cout << kUsage;

@@ -1,25 +1,10 @@
-// palpate-client: the demo front-end of palpate-server.
-//
-//   palpate-client --connect 127.0.0.1:PORT [--scene NAME] [--set KEY=VALUE ...]
-//                  [--forces F1,F2,... | --ramp FMAX] [--seconds S] [--rate HZ]
-//                  [--headless [--max-steps N]] [--csv FILE]
-//
-// Real time (default): opens a session, subscribes to the contact force and the
-// indenter at --rate Hz (default 50), ramps the commanded force from 0 to FMAX
-// over S seconds (or holds each listed force S/count seconds) and prints a live
-// table: time, commanded F, indentation d, contact force, the Hertz depth
-// d_H(contact force) (core/hertz.h) and d / d_H - 1. Then the server's statistics.
-// --headless: opens a headless session and, for each force, steps until rest
-// (contact force within 0.1 % of the command, the indenter moving < 1e-6 m per
-// 100 ticks and slower than 1e-5 m/s, for 5 chunks of 100 ticks in a row) or --max-steps, printing one row per force; exits 0.
-// --csv writes every frame received (real time) or every row (headless).
+// palpate-client: the demo front-end of palpate-server. Usage: kUsage below
+// (palpate-client --help).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -28,6 +13,7 @@
 #include <kj/timer.h>
 #include <kj/exception.h>
 
+#include "cli/arguments.h"
 #include "core/hertz.h"
 #include "protocol/palpate.capnp.h"
 
@@ -36,6 +22,36 @@ namespace {
 using palpate::wire::FrameSink;
 using palpate::wire::PalpateServer;
 using palpate::wire::Session;
+
+const char* kUsage = R"(usage: palpate-client [options]
+The demo front-end of palpate-server: opens a session and presses the indenter.
+Real time (default): subscribes to the contact force and the indenter at --rate
+frames per second, ramps the commanded force from 0 to --ramp FMAX over --seconds
+(or holds each of --forces for an equal share of them) and prints a live table:
+time, tick, commanded F, indentation d, contact force, the Hertz depth d_H of the
+contact force (core/hertz.h) and d / d_H - 1; then the server's statistics.
+--headless: opens a headless session and, for each force, steps until rest (contact
+force within 0.1 % of the command, the indenter moving < 1e-6 m per 100 ticks and
+slower than 1e-5 m/s, for 5 chunks of 100 ticks in a row) or --max-steps, printing
+one row per force.
+  --connect ADDR:PORT  the server (default 127.0.0.1:7420)
+  --scene NAME         a scene of the server's --scene-dir by name, e.g. hertz_cube_haptic
+                       (default: the server's default scene)
+  --set KEY=VALUE      override a scene field by its dotted path (repeatable), e.g.
+                       --set body.distribution.per_edge=12
+  --forces F1,F2,...   forces in N, held one after the other (headless: each to rest)
+  --ramp FMAX          real time: ramp from 0 to FMAX N (default 0); headless without
+                       --forces: FMAX/4, FMAX/2, 3 FMAX/4, FMAX (default FMAX 80 N)
+  --seconds S          real time: length of the run, (0, 86400] (default 5)
+  --rate HZ            real time: frames per second of the subscription, (0, 10000]
+                       (default 50)
+  --headless           a headless session, stepped to rest force by force
+  --max-steps N        headless: most ticks per force, >= 1 (default 20000)
+  --csv FILE           write every frame received (real time) or every row (headless)
+  --help               print this text and exit
+Exit status: 0 when done; 1 when the connection fails or the server refuses (its
+message, naming the field, is printed); 2 for a wrong argument.
+)";
 
 struct Args {
   std::string connect = "127.0.0.1:7420";
@@ -50,50 +66,30 @@ struct Args {
   std::string csv;
 };
 
-[[noreturn]] void usage(const std::string& error) {
-  std::fprintf(stderr,
-               "palpate-client: %s\n"
-               "usage: palpate-client --connect ADDR:PORT [--scene NAME] [--set KEY=VALUE ...]\n"
-               "                      [--forces F1,F2,... | --ramp FMAX] [--seconds S] [--rate HZ]\n"
-               "                      [--headless [--max-steps N]] [--csv FILE]\n",
-               error.c_str());
-  std::exit(2);
-}
-
-double number(const std::string& flag, const std::string& text) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0' || !std::isfinite(v)) usage(flag + " expects a number, got '" + text + "'");
-  return v;
-}
-
 Args parse_args(int argc, char** argv) {
   Args a;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) usage(flag + " needs a value");
-      return argv[++i];
-    };
-    if (flag == "--connect") a.connect = value();
-    else if (flag == "--scene") a.scene = value();
-    else if (flag == "--set") a.overrides.push_back(value());
-    else if (flag == "--forces") {
-      std::stringstream ss(value());
-      for (std::string item; std::getline(ss, item, ',');) a.forces.push_back(number(flag, item));
-      if (a.forces.empty()) usage("--forces needs at least one force");
-    } else if (flag == "--ramp") a.ramp = number(flag, value());
-    else if (flag == "--seconds") a.seconds = number(flag, value());
-    else if (flag == "--rate") a.rate = number(flag, value());
-    else if (flag == "--headless") a.headless = true;
-    else if (flag == "--max-steps") a.max_steps = static_cast<long>(number(flag, value()));
-    else if (flag == "--csv") a.csv = value();
-    else if (flag == "--help" || flag == "-h") usage("help");
-    else usage("unknown option " + flag);
-  }
-  if (!(a.seconds > 0 && a.seconds <= 86400)) usage("--seconds must be in (0, 86400]");
-  if (!(a.rate > 0 && a.rate <= 10000)) usage("--rate must be in (0, 10000]");
-  if (a.max_steps < 1) usage("--max-steps must be >= 1");
+  palpate::cli::parse_or_exit(argc, argv, "palpate-client", kUsage, [&](palpate::cli::Arguments& args) {
+    const std::string& flag = args.flag();
+    if (flag == "--connect") a.connect = args.value();
+    else if (flag == "--scene") a.scene = args.value();
+    else if (flag == "--set") {
+      const std::string assignment = args.value();
+      palpate::cli::scene_override(assignment);  // KEY=VALUE; the server validates the rest
+      a.overrides.push_back(assignment);
+    } else if (flag == "--forces") a.forces = palpate::cli::number_list(args.value(), flag);
+    else if (flag == "--ramp") a.ramp = args.number();
+    else if (flag == "--seconds") {
+      a.seconds = args.number();
+      if (!(a.seconds > 0 && a.seconds <= 86400)) throw std::invalid_argument("--seconds: must be in (0, 86400]");
+    } else if (flag == "--rate") {
+      a.rate = args.number();
+      if (!(a.rate > 0 && a.rate <= 10000)) throw std::invalid_argument("--rate: must be in (0, 10000]");
+    } else if (flag == "--headless") a.headless = true;
+    else if (flag == "--max-steps") a.max_steps = static_cast<long>(args.integer(1, 1000000000));
+    else if (flag == "--csv") a.csv = args.value();
+    else return false;
+    return true;
+  });
   return a;
 }
 

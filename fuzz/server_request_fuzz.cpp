@@ -2,8 +2,9 @@
 //
 // The input (server_request.h) is a kind byte and a Cap'n Proto message, read
 // with capnp::FlatArrayMessageReader under bounded ReaderOptions, then passed
-// through the server's own validation (server/requests.h). An OpenRequest the
-// server accepts is then built and stepped the way a session thread does
+// through the server's own validation (server/requests.h): plan_session, as the
+// RPC thread runs it, then resolve_scene, as the session's thread does. A scene
+// the server accepts is then built and stepped the way a session thread does
 // (server/sim_loop.cpp: build_model, make_state, ticks), with two deviations
 // that keep one input fast: at most kMaxParticles particles (the server's
 // --max-particles, applied by the same check) and iteration caps of 1000.
@@ -11,6 +12,7 @@
 // The contract: a refusal is a kj::Exception (malformed message or a request the
 // server refuses, which goes back to the client); a model build may fail with a
 // std::exception (the session reports it as failed). Anything else is a bug.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -21,6 +23,7 @@
 #include <kj/exception.h>
 
 #include "core/model.h"
+#include "core/options.h"
 #include "core/state.h"
 #include "core/step.h"
 #include "fuzz/server_request.h"
@@ -32,7 +35,7 @@ namespace {
 using namespace palpate;
 using server::ServerOptions;
 
-constexpr double kMaxParticles = 343;  // 7^3
+constexpr int64_t kMaxParticles = 343;  // 7^3
 constexpr int kTicks = 20;
 
 const ServerOptions& options() {
@@ -53,22 +56,23 @@ double default_force_limit() {
 }
 
 // The session thread's work: build, then ticks at the scene's force and at the limit.
-void run_session(server::SimConfig config) {
-  Scene& scene = config.scene;
+void run_session(Scene scene) {
   scene.contact.max_iterations = std::min(scene.contact.max_iterations, 1000);
   scene.integrator.cg_max_iterations = std::min(scene.integrator.cg_max_iterations, 1000);
   Model model;
+  Options opt;
   State state;
   try {
     model = build_model(scene);
-    state = make_state(model);
+    opt = options_of(scene);
+    state = make_state(model, opt);
   } catch (const std::exception&) {
     return;  // the session reports "failed" with e.what()
   }
-  const double limit = server::force_limit(model.scene);
+  const double limit = server::force_limit(scene);
   for (int tick = 0; tick < kTicks; ++tick) {
-    if (tick == kTicks / 2) state.force_command = limit;  // a setForce the server accepts
-    if (step(model, state) != StepStatus::ok) break;      // a blow-up: the server restores a checkpoint
+    if (tick == kTicks / 2) state.force_command = limit;   // a setForce the server accepts
+    if (is_fault(step(model, opt, state))) break;          // a blow-up: the server restores a checkpoint
   }
 }
 
@@ -89,7 +93,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     capnp::FlatArrayMessageReader message(words, reader_options);
     switch (kind) {
       case fuzz::open_request:
-        run_session(server::session_config(message.getRoot<wire::OpenRequest>(), options()));
+        run_session(server::session_scene(message.getRoot<wire::OpenRequest>(), options()));
         break;
       case fuzz::set_force:
         server::check_force(message.getRoot<wire::Session::SetForceParams>().getNewtons(), default_force_limit());

@@ -38,7 +38,7 @@ echo "== palpate-server on 127.0.0.1:$PORT (log: $LOG)"
 "$BUILD_DIR/bin/palpate-server" --listen "127.0.0.1:$PORT" --scene "scenes/$SCENE.json" --rate 1000 >"$LOG" 2>&1 &
 SERVER_PID=$!
 trap 'kill -TERM $SERVER_PID 2>/dev/null || true; wait $SERVER_PID 2>/dev/null || true' EXIT
-for _ in $(seq 100); do  # wait for "listening on" (at most 10 s)
+for _ in $(seq 600); do  # wait for "listening on" (at most 60 s: the server builds its default scene first)
   grep -q "listening on" "$LOG" && break
   kill -0 $SERVER_PID 2>/dev/null || { cat "$LOG"; exit 1; }
   sleep 0.1

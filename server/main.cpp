@@ -1,14 +1,11 @@
 // palpate-server: serves palpate sessions over Cap'n Proto RPC (protocol/palpate.capnp).
+// Usage: kUsage below (palpate-server --help).
 //
-//   palpate-server [--listen 127.0.0.1:7420] [--scene FILE] [--scene-dir DIR] [--rate HZ]
-//                  [--spin-us US] [--no-realtime] [--sndbuf BYTES] [--max-sessions N] [--max-particles N]
-//                  [--log-level trace|debug|info|warn|error|off]
-//
-// Serves until SIGINT/SIGTERM. Prints one line "palpate-server listening on ADDR:PORT"
-// to stdout once it accepts connections (with --listen ...:0 the port is the one
-// the system picked). Wiring, in order: options -> event loop -> listener ->
-// ServerContext + bootstrap ServerImpl -> accept loop -> wait for a signal ->
-// stop every simulation thread -> drop the connections -> drop the event loop.
+// Wiring, in order: options -> the default scene validated and built (a scene that
+// cannot be served stops here, status 1, before anything listens) -> event loop ->
+// listener -> ServerContext + bootstrap ServerImpl -> accept loop -> "listening" line
+// -> wait for a signal -> stop every simulation thread -> drop the connections ->
+// drop the event loop.
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <sys/socket.h>
@@ -22,11 +19,14 @@
 #include <filesystem>
 #include <string>
 
+#include <capnp/message.h>
 #include <capnp/rpc-twoparty.h>
 #include <kj/async-unix.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "cli/arguments.h"
+#include "core/model.h"
 #include "server/session.h"
 
 namespace {
@@ -36,6 +36,35 @@ using palpate::server::ServerContext;
 using palpate::server::ServerImpl;
 using palpate::server::ServerOptions;
 
+const char* kUsage = R"(usage: palpate-server [options]
+Serves palpate sessions over Cap'n Proto RPC (protocol/palpate.capnp, docs/protocol.md)
+until SIGINT or SIGTERM. Each session runs one simulation thread: a fixed-rate real-time
+loop, or headless stepping on request. Once it accepts connections it prints one line,
+"palpate-server listening on ADDR:PORT", on stdout; logs go to stderr.
+  --listen ADDR:PORT   where to listen (default 127.0.0.1:7420; port 0: the system picks
+                       one, and the listening line names it)
+  --scene FILE         the default scene, opened by clients that name none (default:
+                       scenes/hertz_cube.json of the source tree). It is validated, its
+                       files read and its model built before the server listens
+  --scene-dir DIR      the scenes clients open by name, <name>.json, and the folder their
+                       node and mesh files must lie in (default: scenes/ of the source tree)
+  --rate HZ            real-time loop rate of sessions that ask for none, (0, 10000]
+                       (default 1000)
+  --spin-us US         the loop sleeps until US before a deadline, then spins, [0, 1e6]
+                       (default 200)
+  --no-realtime        do not ask for SCHED_FIFO (by default the loops get priority 10
+                       and the RPC thread 5 when the system allows it)
+  --sndbuf BYTES       SO_SNDBUF of accepted sockets, bounding how far a slow reader falls
+                       behind; 0 keeps the system's (default 262144)
+  --max-sessions N     sessions at a time, [1, 1024] (default 16)
+  --max-particles N    largest cloud a session may have, [8, 8000000] (default 200000)
+  --log-level LEVEL    trace, debug, info, warn, error or off (default warn)
+  --help               print this text and exit
+Exit status: 0 after SIGINT or SIGTERM; 1 when the default scene cannot be served (the
+message names the file, the field and the reason) or the address cannot be used; 2 for a
+wrong argument.
+)";
+
 struct Args {
   std::string host = "127.0.0.1";
   unsigned port = 7420;
@@ -44,73 +73,68 @@ struct Args {
   ServerOptions options;
 };
 
-[[noreturn]] void usage(const std::string& error) {
-  std::fprintf(stderr,
-               "palpate-server: %s\n"
-               "usage: palpate-server [--listen ADDR:PORT] [--scene FILE] [--scene-dir DIR] [--rate HZ]\n"
-               "                      [--spin-us US] [--no-realtime] [--sndbuf BYTES] [--max-sessions N] [--max-particles N]\n"
-               "                      [--log-level trace|debug|info|warn|error|off]\n",
-               error.c_str());
-  std::exit(2);
-}
-
-double number(const std::string& flag, const std::string& text) {
-  try {
-    size_t used = 0;
-    const double v = std::stod(text, &used);
-    if (used != text.size()) throw std::invalid_argument(text);
-    return v;
-  } catch (const std::exception&) {
-    usage(flag + " expects a number, got '" + text + "'");
-  }
-}
-
 Args parse_args(int argc, char** argv) {
   Args a;
   const fs::path source_dir = PALPATE_SOURCE_DIR;
   a.options.scene_dir = source_dir / "scenes";
   a.options.default_scene = source_dir / "scenes" / "hertz_cube.json";
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) usage(flag + " needs a value");
-      return argv[++i];
-    };
+  palpate::cli::parse_or_exit(argc, argv, "palpate-server", kUsage, [&](palpate::cli::Arguments& args) {
+    const std::string& flag = args.flag();
     if (flag == "--listen") {
-      const std::string v = value();
+      const std::string v = args.value();
       const auto colon = v.rfind(':');
-      if (colon == std::string::npos) usage("--listen expects ADDR:PORT, got '" + v + "'");
+      if (colon == std::string::npos) throw std::invalid_argument("--listen expects ADDR:PORT, got '" + v + "'");
       a.host = v.substr(0, colon);
-      const double port = number(flag, v.substr(colon + 1));
-      if (port < 0 || port > 65535 || port != static_cast<unsigned>(port)) usage("--listen: bad port in '" + v + "'");
+      const long long port = palpate::cli::integer(v.substr(colon + 1), "--listen: port");
+      if (port < 0 || port > 65535) throw std::invalid_argument("--listen: port must be in [0, 65535], got '" + v + "'");
       a.port = static_cast<unsigned>(port);
     } else if (flag == "--scene") {
-      a.options.default_scene = value();
+      a.options.default_scene = args.value();
     } else if (flag == "--scene-dir") {
-      a.options.scene_dir = value();
+      a.options.scene_dir = args.value();
     } else if (flag == "--rate") {
-      a.options.rate_hz = number(flag, value());
-      if (!(a.options.rate_hz > 0 && a.options.rate_hz <= 10000)) usage("--rate must be in (0, 10000] Hz");
+      a.options.rate_hz = args.number();
+      if (!(a.options.rate_hz > 0 && a.options.rate_hz <= 10000))
+        throw std::invalid_argument("--rate: must be in (0, 10000] Hz");
     } else if (flag == "--spin-us") {
-      a.options.spin_margin_us = number(flag, value());
-      if (!(a.options.spin_margin_us >= 0 && a.options.spin_margin_us <= 1e6)) usage("--spin-us must be in [0, 1e6]");
+      a.options.spin_margin_us = args.number(0, 1e6);
     } else if (flag == "--no-realtime") {
       a.options.try_realtime = false;
     } else if (flag == "--sndbuf") {
-      a.sndbuf = static_cast<int>(number(flag, value()));
+      a.sndbuf = static_cast<int>(args.integer(0, 1 << 30));
     } else if (flag == "--max-particles") {
-      a.options.max_particles = number(flag, value());
+      a.options.max_particles = args.integer(8, 8000000);
     } else if (flag == "--max-sessions") {
-      a.options.max_sessions = static_cast<int>(number(flag, value()));
+      a.options.max_sessions = static_cast<int>(args.integer(1, 1024));
     } else if (flag == "--log-level") {
-      a.log_level = value();
-    } else if (flag == "--help" || flag == "-h") {
-      usage("help");
+      a.log_level = args.value();
+      if (a.log_level != "off" && spdlog::level::from_str(a.log_level) == spdlog::level::off)
+        throw std::invalid_argument("--log-level: '" + a.log_level +
+                                    "' is not one of trace, debug, info, warn, error, off");
     } else {
-      usage("unknown option " + flag);
+      return false;
     }
-  }
+    return true;
+  });
   return a;
+}
+
+// The default scene, as a session that names no scene would get it, validated and
+// built (files read, the stable-dt check passed); false after printing why not.
+bool check_default_scene(const ServerOptions& options) {
+  try {
+    capnp::MallocMessageBuilder message;
+    message.initRoot<palpate::wire::OpenRequest>().getScene().setServerDefault();
+    const palpate::Scene scene =
+        palpate::server::session_scene(message.getRoot<palpate::wire::OpenRequest>().asReader(), options);
+    palpate::build_model(scene);
+    return true;
+  } catch (const kj::Exception& e) {
+    std::fprintf(stderr, "palpate-server: --scene: %s\n", e.getDescription().cStr());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "palpate-server: --scene: %s\n", e.what());
+  }
+  return false;
 }
 
 // One client connection: its stream, the two-party network and the RPC system.
@@ -140,7 +164,7 @@ kj::Promise<void> accept_loop(kj::ConnectionReceiver& listener, capnp::Capabilit
   return listener.accept()
       .then(
           [&, bootstrap, sndbuf](kj::Own<kj::AsyncIoStream> stream) mutable {
-            // A small send buffer bounds how far a slow reader can fall behind (capnp.md §2).
+            // A small send buffer bounds how far a slow reader can fall behind (docs/protocol.md, "Flow control").
             if (sndbuf > 0) stream->setsockopt(SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
             const int one = 1;
             stream->setsockopt(IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
@@ -165,6 +189,7 @@ int main(int argc, char** argv) {
   spdlog::set_level(spdlog::level::from_str(args.log_level));
   spdlog::set_default_logger(spdlog::stderr_color_mt("palpate-server"));
   spdlog::set_level(spdlog::level::from_str(args.log_level));
+  if (!check_default_scene(args.options)) return 1;
   std::signal(SIGPIPE, SIG_IGN);
   // Before any thread exists: the signals are blocked and delivered to the event loop.
   kj::UnixEventPort::captureSignal(SIGINT);
@@ -204,7 +229,7 @@ int main(int argc, char** argv) {
       const int sig = sigint.exclusiveJoin(kj::mv(sigterm)).wait(io.waitScope);
       spdlog::info("signal {}: shutting down {} session(s)", sig, ctx.sessions.size());
 
-      // Simulation threads first, while the loop still exists (capnp.md pitfall).
+      // Simulation threads first, while the loop still exists (docs/protocol.md, "Shutdown").
       ctx.stop_all();
       accepting = nullptr;
     }  // connections (and with them every session and subscription) go here

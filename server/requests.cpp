@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
+#include <memory>
 #include <system_error>
 #include <vector>
 
@@ -64,10 +66,45 @@ void check_mesh_file(const Scene& scene, const ServerOptions& options) {
   } catch (const std::exception& e) {
     fail(scene.source + ": " + field + ": " + e.what());
   }
-  if (static_cast<double>(nodes) > options.max_particles)
+  if (nodes > options.max_particles)
     fail(scene.source + ": " + field + ": the mesh declares " + std::to_string(nodes) +
          " nodes, beyond this server's limit of " + std::to_string(options.max_particles) +
          " particles (palpate-server --max-particles)");
+}
+
+// The nodes of a node list (load_node_list's format, core/node_cloud.h: one node a
+// line; blank lines and lines whose first character other than ' ', '\t', '\r' is
+// '#' are skipped), counted up to stop_after + 1 in constant memory: the file is
+// never read past the first node beyond stop_after.
+int64_t count_listed_nodes(const fs::path& file, int64_t stop_after, const std::string& where) {
+  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(file.c_str(), "rb"), &std::fclose);
+  if (!f) fail(where + "'" + file.string() + "' cannot be read");
+  enum { line_start, skip_line } state = line_start;
+  int64_t nodes = 0;
+  char buffer[1 << 16];
+  for (size_t n; (n = std::fread(buffer, 1, sizeof buffer, f.get())) > 0;) {
+    for (size_t k = 0; k < n; ++k) {
+      const char c = buffer[k];
+      if (c == '\n') state = line_start;
+      else if (state == line_start && c != ' ' && c != '\t' && c != '\r') {
+        state = skip_line;
+        if (c != '#' && ++nodes > stop_after) return nodes;
+      }
+    }
+  }
+  if (std::ferror(f.get())) fail(where + "'" + file.string() + "' cannot be read");
+  return nodes;
+}
+
+// A node-list cloud under the file rule and held to the particle limit.
+void check_node_file(const Scene& scene, const ServerOptions& options) {
+  const fs::path& file = scene.distribution.node_file;
+  const std::string field = "/body/distribution/node_file";
+  check_scene_file(scene, file, field, options);
+  const std::string where = scene.source + ": " + field + ": ";
+  if (count_listed_nodes(fs::weakly_canonical(file), options.max_particles, where) > options.max_particles)
+    fail(where + "'" + file.string() + "' lists more than " + std::to_string(options.max_particles) +
+         " nodes, this server's particle limit (palpate-server --max-particles)");
 }
 
 }  // namespace
@@ -110,67 +147,104 @@ void check_subscriber_rate(double rate_hz) {
     fail("subscribe: options.rateHz: must be in [0, 100000] (0 = every tick), got " + std::to_string(rate_hz));
 }
 
-SimConfig session_config(wire::OpenRequest::Reader request, const ServerOptions& options) {
-  SimConfig config;
-  config.headless = request.getHeadless();
-  config.spin_margin_us = options.spin_margin_us;
-  config.try_realtime = options.try_realtime;
-  config.checkpoint_interval = options.checkpoint_interval;
+uint64_t check_queued(const char* method, uint64_t seq) {
+  if (seq == 0)
+    fail(std::string(method) + ": command queue full (" + std::to_string(kMaxQueuedCommands) + " commands pending)");
+  return seq;
+}
+
+OpenPlan plan_session(wire::OpenRequest::Reader request, const ServerOptions& options) {
+  OpenPlan plan;
+  plan.sim.headless = request.getHeadless();
+  plan.sim.spin_margin_us = options.spin_margin_us;
+  plan.sim.try_realtime = options.try_realtime;
+  plan.sim.checkpoint_interval = options.checkpoint_interval;
   const double rate = request.getRateHz();
   if (!(rate == 0.0 || (rate > 0.0 && rate <= 10000.0)))
     fail("openSession: request.rateHz: must be in (0, 10000] (0 = the server's rate), got " + std::to_string(rate));
-  config.rate_hz = rate == 0.0 ? options.rate_hz : rate;
+  plan.sim.rate_hz = rate == 0.0 ? options.rate_hz : rate;
 
   try {
-    SceneOverrides overrides;
-    for (auto o : request.getOverrides()) overrides.push_back(split_override(o.cStr(), "<rpc overrides>"));
-    auto scene = request.getScene();
-    switch (scene.which()) {
-      case wire::OpenRequest::Scene::SERVER_DEFAULT:
-        config.scene = load_scene(options.default_scene, overrides);
+    for (auto o : request.getOverrides()) plan.overrides.push_back(split_override(o.cStr(), "<rpc overrides>"));
+  } catch (const SceneError& e) {
+    fail(e.what());
+  }
+  auto scene = request.getScene();
+  switch (scene.which()) {
+    case wire::OpenRequest::Scene::SERVER_DEFAULT:
+      plan.kind = OpenPlan::SceneKind::server_default;
+      break;
+    case wire::OpenRequest::Scene::NAME:
+      plan.kind = OpenPlan::SceneKind::name;
+      plan.name = scene.getName().cStr();
+      if (!plain_scene_name(plan.name))
+        fail("openSession: request.scene.name: '" + plan.name +
+             "' is not a plain scene name (letters, digits, '_', '-', '.'; no path)");
+      break;
+    case wire::OpenRequest::Scene::INLINE_SCENE:
+      plan.kind = OpenPlan::SceneKind::inline_scene;
+      try {  // as scene_from_wire does, with the same message
+        plan.inline_json = scene_to_json(scene.getInlineScene());
+      } catch (const kj::Exception& e) {
+        fail(SceneError("<rpc scene>", "", std::string("cannot encode the scene: ") + e.getDescription().cStr()).what());
+      }
+      break;
+    default:  // a union member from a newer schema
+      fail("openSession: request.scene: unknown kind of scene");
+  }
+  return plan;
+}
+
+Scene resolve_scene(const OpenPlan& plan, const ServerOptions& options) {
+  Scene scene;
+  try {
+    switch (plan.kind) {
+      case OpenPlan::SceneKind::server_default:
+        scene = load_scene(options.default_scene, plan.overrides);
         break;
-      case wire::OpenRequest::Scene::NAME: {
-        const std::string name = scene.getName().cStr();
-        if (!plain_scene_name(name))
-          fail("openSession: request.scene.name: '" + name +
-               "' is not a plain scene name (letters, digits, '_', '-', '.'; no path)");
-        const fs::path file = options.scene_dir / (name + ".json");
+      case OpenPlan::SceneKind::name: {
+        const fs::path file = options.scene_dir / (plan.name + ".json");
         std::error_code ec;
         if (!fs::is_regular_file(file, ec)) {
           std::string known;
           for (const auto& n : scene_names(options.scene_dir)) known += (known.empty() ? "" : ", ") + n;
-          fail("openSession: request.scene.name: unknown scene '" + name + "' (known: " + known + ")");
+          fail("openSession: request.scene.name: unknown scene '" + plan.name + "' (known: " + known + ")");
         }
-        config.scene = load_scene(file, overrides);
+        scene = load_scene(file, plan.overrides);
         break;
       }
-      case wire::OpenRequest::Scene::INLINE_SCENE:
-        config.scene = scene_from_wire(scene.getInlineScene(), "<rpc scene>", options.scene_dir, overrides);
+      case OpenPlan::SceneKind::inline_scene:
+        scene = parse_scene(plan.inline_json, "<rpc scene>", options.scene_dir, plan.overrides);
         break;
-      default:  // a union member from a newer schema
-        fail("openSession: request.scene: unknown kind of scene");
     }
   } catch (const SceneError& e) {
     fail(e.what());
   }
 
-  // Bounded memory: refuse lattices beyond the server's particle limit before building.
-  if (const auto& d = config.scene.distribution; d.type == DistributionType::node_file) {
-    check_scene_file(config.scene, d.node_file, "/body/distribution/node_file", options);
+  // Bounded memory: refuse clouds beyond the server's particle limit before building.
+  if (const auto& d = scene.distribution; d.type == DistributionType::node_file) {
+    check_node_file(scene, options);
   } else if (d.type == DistributionType::mesh) {
-    check_mesh_file(config.scene, options);
+    check_mesh_file(scene, options);
   } else {
     double count = 1.0;
     for (int a = 0; a < 3; ++a) {
-      const double edge = config.scene.box.max[a] - config.scene.box.min[a];
+      const double edge = scene.box.max[a] - scene.box.min[a];
       count *= d.spacing > 0.0 ? std::round(edge / d.spacing) + 1.0 : d.per_edge;
     }
-    if (count > options.max_particles)
-      fail(config.scene.source + ": /body/distribution: " + std::to_string(static_cast<long long>(count)) +
+    if (count > static_cast<double>(options.max_particles)) {
+      char text[64];  // count may be far beyond any integer type (a tiny spacing)
+      std::snprintf(text, sizeof text, "%.0f", count);
+      fail(scene.source + ": /body/distribution: " + text +
            " particles exceed this server's limit of " + std::to_string(options.max_particles) +
            " (palpate-server --max-particles)");
+    }
   }
-  return config;
+  return scene;
+}
+
+Scene session_scene(wire::OpenRequest::Reader request, const ServerOptions& options) {
+  return resolve_scene(plan_session(request, options), options);
 }
 
 }  // namespace palpate::server

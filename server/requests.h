@@ -4,6 +4,11 @@
 // the fuzzers (fuzz/server_request_fuzz.cpp) run exactly what the server runs.
 // Every refusal is a kj::Exception (FAILED) whose description goes back to the
 // caller as is and names the field: "openSession: request.rateHz: ...".
+//
+// An OpenRequest is checked in two steps: plan_session() on the RPC thread (cheap
+// checks of the message alone, and a copy of it), then resolve_scene() on the
+// session's own thread (the scene validator, which looks at files, and the node
+// and mesh file rules, which read them).
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -23,7 +28,7 @@ struct ServerOptions {
   bool try_realtime = true;
   int checkpoint_interval = 100;
   int max_sessions = 16;                // concurrent sessions (each owns a thread and a model)
-  double max_particles = 200000;        // lattice size refused beyond this (memory bound per session)
+  int64_t max_particles = 200000;       // clouds refused beyond this (memory bound per session)
 };
 
 // Node and mesh files a client may name: regular files of at most this size.
@@ -35,12 +40,32 @@ constexpr std::uintmax_t kMaxNodeFileBytes = 64u << 20;
 // The scene names under dir (<name>.json), sorted.
 std::vector<std::string> scene_names(const std::filesystem::path& dir);
 
-// The session an OpenRequest asks for: rate, scene (server default, a plain name
-// under scene_dir, or an inline Scene through the file validator), overrides,
-// the particle limit for lattices and meshes (the node count a mesh header declares),
-// and node and mesh files only inside scene_dir or the default scene's folder. The
-// session count limit is the caller's.
-SimConfig session_config(wire::OpenRequest::Reader request, const ServerOptions& options);
+// What an OpenRequest asks for, checked and copied out of the RPC message (which
+// the session's thread must not read: it is freed when the call ends).
+struct OpenPlan {
+  SimConfig sim;  // mode, rate and pacing
+  enum class SceneKind { server_default, name, inline_scene };
+  SceneKind kind = SceneKind::server_default;
+  std::string name;         // SceneKind::name: a plain name (letters, digits, '_', '-', '.')
+  std::string inline_json;  // SceneKind::inline_scene: the wire scene as scene-file JSON
+  SceneOverrides overrides;
+};
+
+// RPC thread, no file access: the rate, the kind of scene, a plain scene name, the
+// override syntax; an inline scene is converted to JSON. The session count limit is
+// the caller's.
+OpenPlan plan_session(wire::OpenRequest::Reader request, const ServerOptions& options);
+
+// The session's thread (reads files, up to kMaxNodeFileBytes each): the scene a plan
+// names (the server default, <scene_dir>/<name>.json, which must exist, or the inline
+// scene through the file validator) with its overrides; node and mesh files only
+// inside scene_dir or the default scene's folder, regular and bounded in size; the
+// particle limit for lattices, meshes (the node count a mesh header declares) and
+// node files (counted up to the limit, without reading further).
+Scene resolve_scene(const OpenPlan& plan, const ServerOptions& options);
+
+// Both steps in one (tests, fuzzers, the server's start-up check of its default scene).
+Scene session_scene(wire::OpenRequest::Reader request, const ServerOptions& options);
 
 // The largest |F| setForce accepts: 100 x the largest verification force, or
 // 100 x the Hertz force at 0.1 m depth when the scene has no sweep.
@@ -52,5 +77,8 @@ void check_force(double newtons, double limit);
 void check_step_count(uint32_t n);
 // Refuse a subscriber rate outside [0, 1e5] Hz (0 = every tick).
 void check_subscriber_rate(double rate_hz);
+// Refuse a command the session's queue has no room for (`seq` from
+// Simulation::enqueue, 0 when full); returns seq.
+uint64_t check_queued(const char* method, uint64_t seq);
 
 }  // namespace palpate::server

@@ -1,6 +1,6 @@
 // Sessions, subscriptions and streaming (the RPC thread).
 //
-// Streaming policy (capnp.md §2): per subscriber {inFlight, nextDue, interval}.
+// Streaming policy (docs/protocol.md, "Flow control"): per subscriber {inFlight, nextDue, interval}.
 // When the simulation publishes (eventfd wake-up), the newest frame goes to every
 // subscriber that is due and has nothing in flight; a due subscriber that still
 // has a frame in flight skips this one (drop-newest) and it is counted. Nothing
@@ -9,8 +9,10 @@
 #include "server/session.h"
 
 #include <cmath>
+#include <stdexcept>
 
 #include <capnp/message.h>
+#include <kj/debug.h>
 #include <spdlog/spdlog.h>
 
 namespace palpate::server {
@@ -68,26 +70,58 @@ void ServerContext::ErrorHandler::taskFailed(kj::Exception&& e) {
   spdlog::debug("task ended: {}", e.getDescription().cStr());
 }
 
+// A cancelled session still starting, held by its task in tasks_ until the thread ends.
+struct ServerContext::Closing {
+  Closing(ServerContext& c, std::unique_ptr<Simulation> s) : ctx(c), sim(std::move(s)) {
+    wake = ctx.io.lowLevelProvider->wrapInputFd(
+        sim->wake_fd(), kj::LowLevelAsyncIoProvider::ALREADY_CLOEXEC | kj::LowLevelAsyncIoProvider::ALREADY_NONBLOCK);
+    ctx.closing_.insert(this);  // last: the destructor runs only for a complete object
+  }
+  ~Closing() noexcept(false) {
+    wake = nullptr;  // before the Simulation closes the eventfd
+    ctx.closing_.erase(this);
+    sim->stop();     // the thread has ended its start (or does so now): a short join
+  }
+  ServerContext& ctx;
+  std::unique_ptr<Simulation> sim;
+  kj::Own<kj::AsyncInputStream> wake;
+  uint8_t buffer[8] = {};
+};
+
+// Resolves once the thread left Phase::starting (it writes the eventfd after setting
+// the phase, so the phase is checked before each wait).
+kj::Promise<void> ServerContext::wait_until_started(Closing& closing) {
+  if (closing.sim->phase() != Phase::starting) return kj::READY_NOW;
+  return closing.wake->tryRead(closing.buffer, 1, sizeof closing.buffer).then([&closing](size_t) {
+    return wait_until_started(closing);
+  });
+}
+
+void ServerContext::adopt_starting(std::unique_ptr<Simulation> sim) {
+  sim->cancel();
+  auto closing = kj::heap<Closing>(*this, std::move(sim));
+  Closing& ref = *closing;
+  tasks_.add(wait_until_started(ref).attach(kj::mv(closing)));
+}
+
 // ---------------------------------------------------------------------------
 // SessionImpl
 
 class SessionImpl final : public wire::Session::Server {
  public:
-  SessionImpl(ServerContext& ctx, SimConfig config)
-      : ctx_(ctx), id_(ctx.next_session_id++), sim_(std::make_unique<Simulation>(std::move(config))) {
+  // Starts the session's thread on the plan; the scene is resolved and validated there.
+  SessionImpl(ServerContext& ctx, OpenPlan plan)
+      : ctx_(ctx), id_(ctx.next_session_id++), sim_(start(plan, ctx.options)) {
     ctx_.sessions[id_] = this;
     wake_ = ctx_.io.lowLevelProvider->wrapInputFd(
         sim_->wake_fd(), kj::LowLevelAsyncIoProvider::ALREADY_CLOEXEC | kj::LowLevelAsyncIoProvider::ALREADY_NONBLOCK);
     wake_loop_ = watch().eagerlyEvaluate([this](kj::Exception&& e) {
       spdlog::error("session {}: wake-up watch failed: {}", id_, e.getDescription().cStr());
     });
-    spdlog::info("session {} opened ({}, {})", id_, sim_->config().scene.name,
-                 sim_->config().headless ? "headless" : "real-time");
   }
 
   ~SessionImpl() noexcept(false) {
     ctx_.sessions.erase(id_);
-    sim_->stop();  // no more wake-ups
     for (auto& sub : subscribers_) {
       auto req = sub.sink.doneRequest();
       req.setReason("session closed");
@@ -95,12 +129,20 @@ class SessionImpl final : public wire::Session::Server {
     }
     subscribers_.clear();
     wake_loop_ = nullptr;
-    wake_ = nullptr;
+    wake_ = nullptr;  // the eventfd is watched by one object at a time
+    if (sim_->phase() == Phase::starting) {
+      // E.g. the client left during openSession: never wait for a start here.
+      spdlog::info("session {} closed while starting", id_);
+      ctx_.adopt_starting(std::move(sim_));
+      return;
+    }
+    sim_->stop();  // no more wake-ups
     const auto c = sim_->counters();
     spdlog::info("session {} closed after {} ticks ({} blow-ups)", id_, c.ticks, c.blow_ups);
   }
 
-  // Resolves once the model is built; rejects with the build error.
+  // Resolves once the model is built; rejects with the error of the start (a scene
+  // error, a file refused, a failed build) as the client's message.
   kj::Promise<void> when_ready() {
     check_phase();
     if (phase_ == Phase::ready) return kj::READY_NOW;
@@ -114,14 +156,15 @@ class SessionImpl final : public wire::Session::Server {
   wire::Session::Client self() { return thisCap(); }
 
   void fill_info(wire::SessionInfo::Builder info) {
+    KJ_ASSERT(phase_ == Phase::ready);
     const Model& m = sim_->model();
-    const Scene& s = sim_->config().scene;
+    const Scene& s = sim_->scene();
     info.setSceneName(s.name);
     info.setParticleCount(static_cast<uint32_t>(m.particle_count));
     info.setDt(s.integrator.dt);
     info.setRateHz(sim_->config().headless ? 0.0 : sim_->config().rate_hz);
     info.setHeadless(sim_->config().headless);
-    info.setForceLimit(force_limit(s));
+    info.setForceLimit(force_limit_);
     auto rest = info.initRestPositions(3 * static_cast<unsigned>(m.particle_count));
     const double* x = m.rest_position.data();
     for (unsigned k = 0; k < rest.size(); ++k) rest.set(k, static_cast<float>(x[k]));
@@ -137,27 +180,27 @@ class SessionImpl final : public wire::Session::Server {
 
   kj::Promise<void> setForce(SetForceContext context) override {
     const double f = context.getParams().getNewtons();
-    check_force(f, force_limit(sim_->config().scene));
+    check_force(f, force_limit_);
     auto results = context.getResults();
-    results.setSeq(sim_->enqueue(CommandType::set_force, f));
+    results.setSeq(check_queued("setForce", sim_->enqueue(CommandType::set_force, f)));
     results.setQueuedAtTick(sim_->newest_tick());
     return kj::READY_NOW;
   }
 
   kj::Promise<void> reset(ResetContext context) override {
-    context.getResults().setSeq(sim_->enqueue(CommandType::reset));
+    context.getResults().setSeq(check_queued("reset", sim_->enqueue(CommandType::reset)));
     return kj::READY_NOW;
   }
 
   kj::Promise<void> pause(PauseContext context) override {
     if (sim_->config().headless) fail("pause: a headless session only advances in step()");
-    context.getResults().setSeq(sim_->enqueue(CommandType::pause));
+    context.getResults().setSeq(check_queued("pause", sim_->enqueue(CommandType::pause)));
     return kj::READY_NOW;
   }
 
   kj::Promise<void> resume(ResumeContext context) override {
     if (sim_->config().headless) fail("resume: a headless session only advances in step()");
-    context.getResults().setSeq(sim_->enqueue(CommandType::resume));
+    context.getResults().setSeq(check_queued("resume", sim_->enqueue(CommandType::resume)));
     return kj::READY_NOW;
   }
 
@@ -173,6 +216,9 @@ class SessionImpl final : public wire::Session::Server {
     auto paf = kj::newPromiseAndFulfiller<void>();
     job_ = kj::mv(paf.fulfiller);
     sim_->request_steps(n);
+    // A caller that goes mid-job no longer holds the session for the rest of the job
+    // (up to 1e6 ticks): when its last reference goes, stop() ends the job at once.
+    context.allowCancellation();
     return paf.promise.then([this, context, positions, contacts]() mutable {
       fill_frame(context.getResults().initFrame(), sim_->frames().front(), positions, contacts);
     });
@@ -264,10 +310,29 @@ class SessionImpl final : public wire::Session::Server {
     });
   }
 
+  static std::unique_ptr<Simulation> start(OpenPlan& plan, const ServerOptions& options) {
+    const SimConfig config = plan.sim;
+    // Runs on the session's thread; RPC errors become plain exceptions there.
+    auto prepare = [plan = std::move(plan), options]() -> Scene {
+      try {
+        return resolve_scene(plan, options);
+      } catch (const kj::Exception& e) {
+        throw std::runtime_error(e.getDescription().cStr());
+      }
+    };
+    return std::make_unique<Simulation>(config, std::move(prepare));
+  }
+
   void check_phase() {
     if (phase_ != Phase::starting) return;
     phase_ = sim_->phase();
-    if (phase_ == Phase::failed) error_ = sim_->status().error;
+    if (phase_ == Phase::failed) {
+      error_ = sim_->status().error;
+    } else if (phase_ == Phase::ready) {
+      force_limit_ = force_limit(sim_->scene());
+      spdlog::info("session {} opened ({}, {}, built in {:.2f} s)", id_, sim_->scene().name,
+                   sim_->config().headless ? "headless" : "real-time", sim_->build_seconds());
+    }
   }
 
   void on_wake() {
@@ -338,14 +403,17 @@ class SessionImpl final : public wire::Session::Server {
   }
 
   friend class SubscriptionImpl;
+  // All members: RPC thread only (the Simulation's own members say which of its
+  // parts the session's thread touches).
   ServerContext& ctx_;
   uint32_t id_;
   std::unique_ptr<Simulation> sim_;  // declared before the watchers: destroyed after them
   kj::Own<kj::AsyncInputStream> wake_;
   kj::Promise<void> wake_loop_ = nullptr;
   uint8_t wake_buffer_[8] = {};
-  Phase phase_ = Phase::starting;
-  std::string error_;
+  Phase phase_ = Phase::starting;  // as last seen on the RPC thread
+  std::string error_;              // phase_ == failed
+  double force_limit_ = 0.0;       // N, once phase_ == ready
   kj::Vector<kj::Own<kj::PromiseFulfiller<void>>> ready_waiters_;
   kj::Own<kj::PromiseFulfiller<void>> job_;
   std::list<Subscriber> subscribers_;
@@ -353,7 +421,7 @@ class SessionImpl final : public wire::Session::Server {
 
 // Releasing the handle (or losing the connection) unsubscribes. Holds the
 // session so that it outlives its subscriptions.
-class SubscriptionImpl final : public wire::Subscription::Server {
+class SubscriptionImpl final : public wire::Subscription::Server {  // RPC thread only
  public:
   SubscriptionImpl(wire::Session::Client session_cap, SessionImpl& session, uint32_t id)
       : session_cap_(kj::mv(session_cap)), session_(session), id_(id) {}
@@ -404,6 +472,7 @@ kj::Promise<void> ServerImpl::attach(AttachContext context) {
   const auto it = ctx_.sessions.find(id);
   if (it == ctx_.sessions.end()) fail("attach: sessionId: no live session " + std::to_string(id));
   SessionImpl& session = *it->second;
+  context.allowCancellation();  // waiting for a start holds nothing worth finishing
   auto ready = session.when_ready();
   return ready.then([context, cap = session.self(), &session]() mutable {
     auto results = context.getResults();
@@ -412,15 +481,22 @@ kj::Promise<void> ServerImpl::attach(AttachContext context) {
   });
 }
 
+// Never blocks the event loop: only the cheap checks run here; the scene is
+// validated, its files read and its model built on the session's thread, and the
+// call resolves (or rejects with that thread's message) when it is done.
 kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
-  if (static_cast<int>(ctx_.sessions.size()) >= ctx_.options.max_sessions)
-    fail("openSession: the server already runs " + std::to_string(ctx_.sessions.size()) + " sessions (the limit)");
-  SimConfig config = session_config(context.getParams().getRequest(), ctx_.options);
+  const size_t running = ctx_.sessions.size() + ctx_.closing_sessions();
+  if (static_cast<int>(running) >= ctx_.options.max_sessions)
+    fail("openSession: the server already runs " + std::to_string(running) + " sessions (the limit)");
+  OpenPlan plan = plan_session(context.getParams().getRequest(), ctx_.options);
+  context.allowCancellation();  // a caller that cancels or disconnects drops the start (below)
 
-  auto impl = kj::heap<SessionImpl>(ctx_, std::move(config));
+  auto impl = kj::heap<SessionImpl>(ctx_, std::move(plan));
   SessionImpl& session = *impl;
   wire::Session::Client cap = kj::mv(impl);
   auto ready = session.when_ready();
+  // If the caller goes meanwhile, this promise is dropped with `cap`: the session,
+  // still starting, is cancelled and handed to ctx_.adopt_starting (no wait here).
   return ready.then([context, cap = kj::mv(cap), &session]() mutable {
     auto results = context.getResults();
     session.fill_info(results.initInfo());
@@ -430,6 +506,7 @@ kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
 
 void ServerContext::stop_all() {
   for (auto& [id, s] : sessions) s->stop();
+  for (Closing* c : closing_) c->sim->stop();
 }
 
 }  // namespace palpate::server

@@ -1,6 +1,8 @@
 #pragma once
 // The RPC side of the server (runs on the KJ event-loop thread only):
 // ServerImpl (bootstrap), SessionImpl (one Simulation each), SubscriptionImpl.
+// Nothing here is touched by a simulation thread; they meet in Simulation
+// (sim_loop.h), whose members say which side owns them.
 #include <cstdint>
 #include <filesystem>
 #include <list>
@@ -20,26 +22,39 @@ namespace palpate::server {
 class SessionImpl;
 
 // Shared by every connection: options, the live sessions (for shutdown) and a
-// TaskSet for fire-and-forget calls.
+// TaskSet for fire-and-forget calls. RPC thread only.
 struct ServerContext {
   ServerContext(kj::AsyncIoContext& io, ServerOptions options);
   kj::AsyncIoContext& io;
   ServerOptions options;
-  std::map<uint32_t, SessionImpl*> sessions;  // by id
+  std::map<uint32_t, SessionImpl*> sessions;  // by id, starting ones included
   uint32_t next_subscriber_id = 1;
   uint32_t next_session_id = 1;
 
-  // Stops every simulation thread (before the event loop goes away).
+  // Stops every simulation thread (before the event loop goes away). Waits for
+  // starts in progress to reach the end of their stage.
   void stop_all();
   void add_task(kj::Promise<void> task) { tasks_.add(kj::mv(task)); }
 
+  // A session whose last reference went while its thread was still starting
+  // (validating, reading files, building): cancelled and kept, without waiting for
+  // it, until the thread has ended; then joined and freed.
+  void adopt_starting(std::unique_ptr<Simulation> sim);
+  // Sessions adopted that way whose thread has not ended yet (they count against
+  // --max-sessions: a client cannot pile up builds by opening and leaving).
+  size_t closing_sessions() const { return closing_.size(); }
+
  private:
+  struct Closing;
+  static kj::Promise<void> wait_until_started(Closing& closing);
   struct ErrorHandler : kj::TaskSet::ErrorHandler {
     void taskFailed(kj::Exception&& e) override;
   } error_handler_;
+  std::set<Closing*> closing_;  // declared before tasks_: a Closing (held by a task) erases itself
   kj::TaskSet tasks_{error_handler_};
 };
 
+// The bootstrap capability, one per server (every connection shares it). RPC thread only.
 class ServerImpl final : public wire::PalpateServer::Server {
  public:
   explicit ServerImpl(ServerContext& ctx) : ctx_(ctx) {}

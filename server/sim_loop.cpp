@@ -58,55 +58,18 @@ bool diverged(const Model& model, const State& state, double bound) {
 }  // namespace
 
 // ---------------------------------------------------------------------------
-// Histogram
-
-void Histogram::add(double us) {
-  if (!(us >= 0.0)) us = 0.0;
-  int bin;
-  if (us < kFine) bin = static_cast<int>(us);
-  else bin = std::min(kFine + static_cast<int>((us - kFine) / 1000.0), kFine + kCoarse);
-  bins_[bin].fetch_add(1, std::memory_order_relaxed);
-  count_.fetch_add(1, std::memory_order_relaxed);
-  if (us > max_.load(std::memory_order_relaxed)) max_.store(us, std::memory_order_relaxed);  // one writer
-}
-
-void Histogram::clear() {
-  for (auto& b : bins_) b.store(0, std::memory_order_relaxed);
-  count_.store(0, std::memory_order_relaxed);
-  max_.store(0.0, std::memory_order_relaxed);
-}
-
-Histogram::Summary Histogram::summary() const {
-  Summary s;
-  constexpr int kBins = kFine + kCoarse + 1;
-  std::vector<uint64_t> copy(kBins);
-  uint64_t total = 0;
-  for (int i = 0; i < kBins; ++i) total += copy[i] = bins_[i].load(std::memory_order_relaxed);
-  s.count = total;
-  s.max = max_.load(std::memory_order_relaxed);
-  if (total == 0) return s;
-  // Upper edge of the bin holding the q-quantile (capped by the exact maximum).
-  auto quantile = [&](double q) {
-    const uint64_t rank = static_cast<uint64_t>(std::ceil(q * static_cast<double>(total)));
-    uint64_t seen = 0;
-    for (int i = 0; i < kBins; ++i) {
-      seen += copy[i];
-      if (seen >= rank && copy[i] > 0) {
-        const double upper = i < kFine ? i + 1.0 : kFine + (i - kFine + 1) * 1000.0;
-        return std::min(upper, s.max);
-      }
-    }
-    return s.max;
-  };
-  s.p50 = quantile(0.50);
-  s.p99 = quantile(0.99);
-  return s;
-}
-
-// ---------------------------------------------------------------------------
 // Simulation
 
-Simulation::Simulation(SimConfig config) : config_(std::move(config)) {
+Simulation::Simulation(SimConfig config, ScenePreparer prepare)
+    : config_(std::move(config)), prepare_(std::move(prepare)) {
+  start();
+}
+
+Simulation::Simulation(SimConfig config, Scene scene) : config_(std::move(config)), scene_(std::move(scene)) {
+  start();
+}
+
+void Simulation::start() {
   wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
   if (wake_fd_ < 0) throw std::runtime_error(std::string("eventfd: ") + std::strerror(errno));
   commands_.reserve(64);
@@ -119,19 +82,24 @@ Simulation::~Simulation() {
   if (wake_fd_ >= 0) close(wake_fd_);
 }
 
-void Simulation::stop() {
+void Simulation::cancel() {
   {
     std::lock_guard<std::mutex> lock(job_mutex_);
     stop_.store(true);
   }
   job_cv_.notify_all();
+}
+
+void Simulation::stop() {
+  cancel();
   if (thread_.joinable()) thread_.join();
 }
 
 uint64_t Simulation::enqueue(CommandType type, double value) {
   std::lock_guard<std::mutex> lock(command_mutex_);
+  if (commands_.size() >= kMaxQueuedCommands) return 0;  // refused: nothing queued, no number used
   const uint64_t seq = next_seq_++;
-  if (commands_.size() < 4096) commands_.push_back({type, value, seq});  // bounded; clients are rate-limited anyway
+  commands_.push_back({type, value, seq});
   return seq;
 }
 
@@ -182,22 +150,40 @@ SimStatus Simulation::status() const {
   return s;
 }
 
+// The start, stage by stage; a cancel() ends it between stages (build_model itself
+// cannot be interrupted).
+void Simulation::prepare_and_build() {
+  auto check_cancelled = [this] {
+    if (stop_.load()) throw std::runtime_error("session closed while starting");
+  };
+  if (prepare_) {
+    scene_ = prepare_();
+    prepare_ = nullptr;  // releases what it captured (the request)
+  }
+  check_cancelled();
+  const int64_t t0 = now_ns();
+  model_ = std::make_unique<Model>(build_model(scene_));
+  check_cancelled();
+  options_ = options_of(scene_);
+  state_ = std::make_unique<State>(make_state(*model_, options_));
+  divergence_bound_ = divergence_bound(*model_);
+  rest_ = std::make_unique<Checkpoint>(*state_);
+  checkpoint_ = std::make_unique<Checkpoint>(*state_);
+  SnapshotBuffer frames([n = model_->particle_count](Snapshot& s) { s.reserve(n); });
+  frames_writer_ = std::move(frames.writer);
+  frames_reader_ = std::move(frames.reader);
+  build_seconds_ = (now_ns() - t0) * 1e-9;
+}
+
 void Simulation::run() {
-  // Threads inherit the creator's policy (the RPC thread may be SCHED_FIFO): model
-  // building and headless stepping run as ordinary threads; run_realtime() asks again.
+  // Threads inherit the creator's policy (the RPC thread may be SCHED_FIFO): the start
+  // and headless stepping run as ordinary threads; run_realtime() asks again.
   sched_param normal{};
   pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
   try {
-    const int64_t t0 = now_ns();
-    model_ = std::make_unique<Model>(build_model(config_.scene));
-    options_ = options_of(config_.scene);
-    state_ = std::make_unique<State>(make_state(*model_, options_));
-    divergence_bound_ = divergence_bound(*model_);
-    rest_ = std::make_unique<Checkpoint>(*state_);
-    checkpoint_ = std::make_unique<Checkpoint>(*state_);
-    for (int i = 0; i < 3; ++i) frames_.slot(i).reserve(model_->particle_count);
-    build_seconds_ = (now_ns() - t0) * 1e-9;
+    prepare_and_build();
   } catch (const std::exception& e) {
+    prepare_ = nullptr;
     {
       std::lock_guard<std::mutex> lock(text_mutex_);
       error_ = e.what();
@@ -308,6 +294,7 @@ bool Simulation::tick_once() {
     return false;
   }
 
+  if (config_.before_step_for_tests) config_.before_step_for_tests(state);  // TEST HOOK (empty in the server)
   const int64_t t0 = now_ns();
   const StepStatus status = step(model, options_, state);
   const int64_t t1 = now_ns();
@@ -337,6 +324,7 @@ void Simulation::recover(const std::string& what) {
     rest_->restore(state);
     checkpoint_->save(state);
     state.force_command = model.initial_force_command;
+    status_force_.store(state.force_command, std::memory_order_relaxed);
     how = "restored the rest state and the scene's initial force (" + std::to_string(state.force_command) +
           " N; the command was " + std::to_string(command) + " N)";
   } else {
@@ -356,7 +344,7 @@ void Simulation::recover(const std::string& what) {
 void Simulation::publish() {
   const Model& model = *model_;
   const State& state = *state_;
-  Snapshot& s = frames_.back();
+  Snapshot& s = frames_writer_.back();
   s.tick = state.tick;
   s.sim_time = state.time;
   s.indenter[0] = state.indenter_center[0];
@@ -390,7 +378,7 @@ void Simulation::publish() {
   status_tick_.store(state.tick, std::memory_order_relaxed);
   status_time_.store(state.time, std::memory_order_relaxed);
   frames_published_.fetch_add(1, std::memory_order_relaxed);
-  if (frames_.publish()) frames_coalesced_.fetch_add(1, std::memory_order_relaxed);
+  if (frames_writer_.publish()) frames_coalesced_.fetch_add(1, std::memory_order_relaxed);
   notify();
 }
 

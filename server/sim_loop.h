@@ -1,16 +1,20 @@
 #pragma once
-// One simulation session's thread: builds the Model, then either runs the
-// fixed-rate real-time loop on absolute deadlines or (headless) steps on request.
+// One simulation session's thread: resolves and validates the scene (file reads
+// included), builds the Model, then either runs the fixed-rate real-time loop on
+// absolute deadlines or (headless) steps on request.
 //
 // Threading: the thread holds no KJ objects. The RPC thread talks to it through
 //  - commands: enqueue() (a short mutex), drained at the start of each tick;
 //  - headless jobs: request_steps() (mutex + condition variable);
-//  - results: the TripleBuffer (newest frame), atomics (status, counters) and
-//    lock-free histograms; every publish writes 1 to wake_fd() (an eventfd),
-//    which the RPC thread watches.
+//  - results: the triple buffer (newest frame; the sim thread holds its writer,
+//    the RPC thread its reader), atomics (phase, status, counters) and lock-free
+//    histograms; every publish, and the end of the start (ready or failed), writes
+//    1 to wake_fd() (an eventfd), which the RPC thread watches.
+// Every member below says which thread may touch it.
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -22,39 +26,32 @@
 #include "core/options.h"
 #include "core/scene.h"
 #include "core/state.h"
+#include "server/histogram.h"
 #include "server/snapshot.h"
 
 namespace palpate::server {
 
 int64_t now_ns();  // CLOCK_MONOTONIC
 
-// Lock-free histogram of durations in microseconds: 1 us bins to 5 ms, then
-// 1 ms bins to 1 s, and an exact maximum. One writer thread, any readers.
-class Histogram {
- public:
-  void add(double us);
-  void clear();  // writer thread only
-  struct Summary {
-    double p50 = 0, p99 = 0, max = 0;
-    uint64_t count = 0;
-  };
-  Summary summary() const;
+// Unapplied commands a session holds; enqueue() refuses beyond.
+constexpr size_t kMaxQueuedCommands = 4096;
 
- private:
-  static constexpr int kFine = 5000, kCoarse = 995;  // 0..5 ms by 1 us, 5 ms..1 s by 1 ms
-  std::atomic<uint64_t> bins_[kFine + kCoarse + 1] = {};
-  std::atomic<uint64_t> count_{0};
-  std::atomic<double> max_{0.0};
-};
-
+// How a session runs; known before its scene is.
 struct SimConfig {
-  Scene scene;
   bool headless = false;
   double rate_hz = 1000.0;
   double spin_margin_us = 200.0;  // sleep until this long before the deadline, then spin
   bool try_realtime = true;       // ask for SCHED_FIFO (silently refused when not allowed)
   int checkpoint_interval = 100;  // ticks between checkpoints of the last good state
+  // TEST HOOK (tests/server_simulation_test.cpp only; empty in the server): called on
+  // the session's thread with the state just before each step, e.g. to inject a NaN.
+  std::function<void(State&)> before_step_for_tests;
 };
+
+// Gives the session's scene, on the session's thread (validation and file reads,
+// which must not run on the RPC thread). What it throws fails the session, and
+// its what() is the message the client gets.
+using ScenePreparer = std::function<Scene()>;
 
 enum class CommandType { set_force, reset, pause, resume };
 
@@ -84,21 +81,30 @@ struct SimStatus {
 
 class Simulation {
  public:
-  explicit Simulation(SimConfig config);
+  // Starts the thread; it runs prepare() for the scene, then builds the model.
+  Simulation(SimConfig config, ScenePreparer prepare);
+  // The same with a scene already validated.
+  Simulation(SimConfig config, Scene scene);
   ~Simulation();  // stop()
   Simulation(const Simulation&) = delete;
   Simulation& operator=(const Simulation&) = delete;
 
-  // Stops and joins the thread (idempotent). After it no more wake-ups happen.
+  // Any thread, never blocks: asks the thread to end. A start in progress ends
+  // after the stage it is in (preparing the scene, building the model) as failed.
+  void cancel();
+  // The owner's thread: cancel() and join (idempotent). After it no more wake-ups happen.
   void stop();
 
   int wake_fd() const { return wake_fd_; }
   Phase phase() const { return phase_.load(std::memory_order_acquire); }
-  const Model& model() const { return *model_; }  // phase() == ready
   const SimConfig& config() const { return config_; }
+  // After phase() == ready only (any thread; constant from then on).
+  const Scene& scene() const { return scene_; }
+  const Model& model() const { return *model_; }
   double build_seconds() const { return build_seconds_; }
 
-  // RPC thread. Returns the command's sequence number (> 0).
+  // RPC thread. Returns the command's sequence number (> 0), or 0 when the queue
+  // already holds kMaxQueuedCommands commands (then nothing is queued or numbered).
   uint64_t enqueue(CommandType type, double value = 0.0);
   // The subscribers' needs, read by the loop at each publish.
   void set_wanted(bool positions, bool contacts) {
@@ -106,16 +112,18 @@ class Simulation {
     want_contacts_.store(contacts, std::memory_order_relaxed);
   }
 
-  // Headless: start a job of n ticks; job_done() turns true (and wake_fd fires)
+  // Headless: start a job of n ticks; take_job_done() turns true (and wake_fd fires)
   // when it finished and its last frame is published. One job at a time.
   void request_steps(uint32_t n);
   bool take_job_done() { return job_done_.exchange(false, std::memory_order_acq_rel); }
 
-  TripleBuffer& frames() { return frames_; }
+  // The reader of the published frames: one consumer thread only (the RPC thread),
+  // after phase() == ready.
+  SnapshotBuffer::Reader& frames() { return frames_reader_; }
   int64_t newest_tick() const { return status_tick_.load(std::memory_order_relaxed); }
 
-  SimCounters counters() const;
-  SimStatus status() const;
+  SimCounters counters() const;  // any thread
+  SimStatus status() const;      // any thread
 
  private:
   struct Command {
@@ -124,7 +132,9 @@ class Simulation {
     uint64_t seq;
   };
 
+  void start();
   void run();
+  void prepare_and_build();
   void run_realtime();
   void run_headless();
   // Drains commands and steps once; false when paused (no step).
@@ -133,37 +143,48 @@ class Simulation {
   void publish();
   void notify();
 
-  SimConfig config_;
+  // Set at construction, then constant (any thread).
+  const SimConfig config_;
   int wake_fd_ = -1;
+
+  // Sim thread only until phase ready, then constant and readable by any thread.
+  ScenePreparer prepare_;  // sim thread only (run once, then released)
+  Scene scene_;
   std::unique_ptr<Model> model_;
+  double build_seconds_ = 0.0;
+
+  // Sim thread only.
   Options options_;  // the scene's (options_of); the loop steps with them
   std::unique_ptr<State> state_;
   double divergence_bound_ = 0.0;  // m, see diverged() in sim_loop.cpp
   std::unique_ptr<Checkpoint> rest_, checkpoint_;
-  double build_seconds_ = 0.0;
+  SnapshotBuffer::Writer frames_writer_;
+  std::vector<Command> drained_;
+  bool paused_ = false;
+  uint64_t applied_seq_ = 0;
+  int64_t ticks_since_recovery_ = -1;  // -1: never recovered
 
+  // Created by the sim thread before phase ready, then RPC thread only.
+  SnapshotBuffer::Reader frames_reader_;
+
+  // Any thread (atomic).
   std::atomic<Phase> phase_{Phase::starting};
   std::atomic<bool> stop_{false};
   std::atomic<bool> want_positions_{false}, want_contacts_{false};
 
+  // Any thread, under command_mutex_.
   std::mutex command_mutex_;
-  std::vector<Command> commands_, drained_;
-  uint64_t next_seq_ = 1;  // RPC thread (under command_mutex_)
+  std::vector<Command> commands_;
+  uint64_t next_seq_ = 1;
 
+  // Any thread, under job_mutex_ (job_done_: atomic).
   std::mutex job_mutex_;
   std::condition_variable job_cv_;
   uint32_t job_ticks_ = 0;
   bool job_pending_ = false;
   std::atomic<bool> job_done_{false};
 
-  TripleBuffer frames_;
-
-  // Loop-thread state.
-  bool paused_ = false;
-  uint64_t applied_seq_ = 0;
-  int64_t ticks_since_recovery_ = -1;  // -1: never recovered
-
-  // Published counters.
+  // Written by the sim thread, read by any thread (atomic; the histograms are lock-free).
   std::atomic<int64_t> ticks_{0};
   std::atomic<int64_t> start_ns_{0}, last_tick_ns_{0};
   std::atomic<int64_t> stepping_ns_{0};
@@ -174,10 +195,13 @@ class Simulation {
   std::atomic<int64_t> status_tick_{0};
   std::atomic<double> status_time_{0.0}, status_force_{0.0};
   Histogram step_us_, lateness_us_;
-  mutable std::mutex text_mutex_;  // guards the strings below
+
+  // Written by the sim thread, read by any thread, under text_mutex_.
+  mutable std::mutex text_mutex_;
   std::string last_blow_up_, error_;
   int64_t last_blow_up_tick_ = -1;
 
+  // The owner's thread (constructor, stop()).
   std::thread thread_;
 };
 

@@ -3,7 +3,11 @@
 // hands the newest one to the RPC thread without either side blocking.
 // No KJ or Cap'n Proto here: the simulation thread includes this.
 #include <atomic>
+#include <cassert>
+#include <concepts>
 #include <cstdint>
+#include <memory>
+#include <utility>
 #include <vector>
 
 namespace palpate::server {
@@ -32,36 +36,93 @@ struct Snapshot {
   }
 };
 
-// Single writer, single reader. The writer fills back() and publish()es it; the
-// reader calls take() and reads front() until its next take(). Each side owns one
-// slot; the third ("middle") is exchanged atomically, flagged when it is new.
+// A single-writer, single-reader triple buffer of T, as two handles: the writer
+// fills back() and publish()es it, the reader take()s the newest and reads front()
+// until its next take(). Each handle owns one slot; the third ("middle") is
+// exchanged atomically and flagged when it holds a frame the reader has not taken.
+// Neither handle can reach the other's slot, so a frame is never written while it
+// is read (no torn frames) and the reader only ever moves to newer frames.
+//
+//   TripleBuffer<Snapshot> frames([n](Snapshot& s) { s.reserve(n); });
+//   give frames.writer to one thread, frames.reader to the other (move-only handles)
+//
+// Each handle belongs to one thread; they share the slots (freed with the last).
+template <class T>
 class TripleBuffer {
+  struct Shared;
+
  public:
-  Snapshot& slot(int i) { return slots_[i]; }
+  class Writer {
+   public:
+    Writer() = default;  // empty until moved from a TripleBuffer
+    Writer(Writer&&) noexcept = default;
+    Writer& operator=(Writer&&) noexcept = default;
+    T& back() {
+      assert(shared_);
+      return shared_->slots[back_];
+    }
+    // Makes back() the newest frame and gives the writer a free slot as back().
+    // Returns true if the reader had not taken the previous frame (it is replaced).
+    bool publish() {
+      assert(shared_);
+      const int previous = shared_->middle.exchange(back_ | kNew, std::memory_order_acq_rel);
+      back_ = previous & kIndex;
+      return (previous & kNew) != 0;
+    }
 
-  // Writer.
-  Snapshot& back() { return slots_[back_]; }
-  // Returns true if the reader had not taken the previous frame (it is replaced).
-  bool publish() {
-    const int previous = middle_.exchange(back_ | kNew, std::memory_order_acq_rel);
-    back_ = previous & kIndex;
-    return (previous & kNew) != 0;
-  }
+   private:
+    friend class TripleBuffer;
+    explicit Writer(std::shared_ptr<Shared> s) : shared_(std::move(s)) {}
+    std::shared_ptr<Shared> shared_;
+    int back_ = 0;
+  };
 
-  // Reader: true if a newer frame became front().
-  bool take() {
-    if ((middle_.load(std::memory_order_acquire) & kNew) == 0) return false;
-    front_ = middle_.exchange(front_, std::memory_order_acq_rel) & kIndex;
-    return true;
+  class Reader {
+   public:
+    Reader() = default;  // empty until moved from a TripleBuffer
+    Reader(Reader&&) noexcept = default;
+    Reader& operator=(Reader&&) noexcept = default;
+    // True if a newer frame became front().
+    bool take() {
+      assert(shared_);
+      if ((shared_->middle.load(std::memory_order_acquire) & kNew) == 0) return false;
+      front_ = shared_->middle.exchange(front_, std::memory_order_acq_rel) & kIndex;
+      return true;
+    }
+    // The newest frame taken (before the first take(): the initial value).
+    const T& front() const {
+      assert(shared_);
+      return shared_->slots[front_];
+    }
+
+   private:
+    friend class TripleBuffer;
+    explicit Reader(std::shared_ptr<Shared> s) : shared_(std::move(s)) {}
+    std::shared_ptr<Shared> shared_;
+    int front_ = 1;
+  };
+
+  Writer writer;
+  Reader reader;
+
+  // Three value-initialised slots, each passed once to prepare(T&) first (to
+  // preallocate, so that neither side allocates later).
+  template <class Prepare>
+    requires std::invocable<Prepare&, T&>
+  explicit TripleBuffer(Prepare&& prepare) : TripleBuffer(std::make_shared<Shared>()) {
+    for (T& slot : writer.shared_->slots) prepare(slot);
   }
-  const Snapshot& front() const { return slots_[front_]; }
+  TripleBuffer() : TripleBuffer([](T&) {}) {}
 
  private:
   static constexpr int kNew = 4, kIndex = 3;
-  Snapshot slots_[3];
-  int back_ = 0;                // writer's
-  int front_ = 1;               // reader's
-  std::atomic<int> middle_{2};  // shared: index | kNew
+  struct Shared {
+    T slots[3] = {};
+    std::atomic<int> middle{2};  // index | kNew
+  };
+  explicit TripleBuffer(std::shared_ptr<Shared> s) : writer(s), reader(s) {}
 };
+
+using SnapshotBuffer = TripleBuffer<Snapshot>;
 
 }  // namespace palpate::server

@@ -52,7 +52,7 @@ class ServerRequests : public ::testing::Test {
     d.setType(wire::DistributionType::NODE_FILE);
     d.setNodeFile(file);
     try {
-      session_config(request, options_);
+      session_scene(request, options_);
     } catch (const kj::Exception& e) {
       return e.getDescription().cStr();
     }
@@ -69,7 +69,7 @@ class ServerRequests : public ::testing::Test {
     d.setFile(file);
     scene.initMls().setVolumes(wire::VolumeRule::MESH);
     try {
-      session_config(request, options_);
+      session_scene(request, options_);
     } catch (const kj::Exception& e) {
       return e.getDescription().cStr();
     }
@@ -129,6 +129,78 @@ TEST_F(ServerRequests, MeshBeyondTheParticleLimitIsRefusedBeforeItIsRead) {
   EXPECT_TRUE(contains(bad, "bad.msh:5: numNodes: expected an integer, got 'many'")) << bad;
 }
 
+TEST_F(ServerRequests, NodeFileBeyondTheParticleLimitIsRefusedBeforeItIsRead) {
+  options_.max_particles = 7;  // nodes.txt lists 8
+  const std::string e = open_node_file("nodes.txt");
+  EXPECT_TRUE(contains(e, "/body/distribution/node_file: '")) << e;
+  EXPECT_TRUE(contains(e, "nodes.txt' lists more than 7 nodes, this server's particle limit "
+                          "(palpate-server --max-particles)"))
+      << e;
+  options_.max_particles = 8;
+  EXPECT_EQ(open_node_file("nodes.txt"), "");
+  // Blank lines and comments are not nodes (the node list format, core/node_cloud.h).
+  {
+    std::ofstream f(dir_ / "scenes" / "commented.txt");
+    f << "# a cube\n\n   \n\t# indented comment\r\n";
+    for (int k = 0; k < 8; ++k) f << "  " << (k & 1) << ' ' << (k >> 1 & 1) << ' ' << (k >> 2 & 1) - 1 << "\r\n";
+    f << "# end";
+  }
+  EXPECT_EQ(open_node_file("commented.txt"), "");
+  // The count stops at the first node beyond the limit: what follows is never read
+  // (here it would not even be a node list), and the refusal is the limit's.
+  {
+    std::ofstream f(dir_ / "scenes" / "long.txt");
+    for (int k = 0; k < 9; ++k) f << k << " 0 -1\n";
+    f << std::string(1 << 20, 'x') << '\n';
+  }
+  const std::string long_file = open_node_file("long.txt");
+  EXPECT_TRUE(contains(long_file, "long.txt' lists more than 8 nodes")) << long_file;
+}
+
+// plan_session runs on the RPC thread: it checks the message only and touches no
+// file; the scene, its existence and its files are resolve_scene's (the session's thread).
+TEST_F(ServerRequests, PlanningASessionReadsNoFiles) {
+  capnp::MallocMessageBuilder mb;
+  auto request = mb.initRoot<wire::OpenRequest>();
+  request.getScene().setName("no_such_scene");
+  request.setRateHz(500);
+  request.setHeadless(true);
+  request.initOverrides(1).set(0, "mls.neighbors=26");
+  const OpenPlan plan = plan_session(request, options_);
+  EXPECT_EQ(plan.kind, OpenPlan::SceneKind::name);
+  EXPECT_EQ(plan.name, "no_such_scene");
+  EXPECT_EQ(plan.sim.rate_hz, 500.0);
+  EXPECT_TRUE(plan.sim.headless);
+  ASSERT_EQ(plan.overrides.size(), 1u);
+  EXPECT_EQ(plan.overrides[0].first, "mls.neighbors");
+  try {
+    resolve_scene(plan, options_);
+    ADD_FAILURE() << "an unknown scene was resolved";
+  } catch (const kj::Exception& e) {
+    EXPECT_TRUE(contains(e.getDescription().cStr(), "unknown scene 'no_such_scene' (known: default)"))
+        << e.getDescription().cStr();
+  }
+  // An inline scene naming a missing node file: planned, refused when resolved.
+  auto inline_request = mb.initRoot<wire::OpenRequest>();
+  auto d = inline_request.getScene().initInlineScene().initBody().initDistribution();
+  d.setType(wire::DistributionType::NODE_FILE);
+  d.setNodeFile("missing.txt");
+  const OpenPlan inline_plan = plan_session(inline_request, options_);
+  EXPECT_EQ(inline_plan.kind, OpenPlan::SceneKind::inline_scene);
+  EXPECT_TRUE(contains(inline_plan.inline_json, "missing.txt")) << inline_plan.inline_json;
+  EXPECT_THROW(resolve_scene(inline_plan, options_), kj::Exception);
+  // What the RPC thread refuses by itself.
+  auto bad = mb.initRoot<wire::OpenRequest>();
+  bad.getScene().setName("../default");
+  EXPECT_THROW(plan_session(bad, options_), kj::Exception);
+  bad.getScene().setName("default");
+  bad.setRateHz(-1);
+  EXPECT_THROW(plan_session(bad, options_), kj::Exception);
+  bad.setRateHz(0);
+  bad.initOverrides(1).set(0, "no_equals_sign");
+  EXPECT_THROW(plan_session(bad, options_), kj::Exception);
+}
+
 TEST_F(ServerRequests, OverridesCannotPointANamedSceneElsewhere) {
   capnp::MallocMessageBuilder mb;
   auto request = mb.initRoot<wire::OpenRequest>();
@@ -136,7 +208,7 @@ TEST_F(ServerRequests, OverridesCannotPointANamedSceneElsewhere) {
   auto o = request.initOverrides(2);
   o.set(0, "body.distribution.type=node_file");
   o.set(1, "body.distribution.node_file=/dev/zero");
-  EXPECT_THROW(session_config(request, options_), kj::Exception);
+  EXPECT_THROW(session_scene(request, options_), kj::Exception);
 }
 
 TEST_F(ServerRequests, CommandsOutOfRangeAreRefused) {
@@ -147,6 +219,13 @@ TEST_F(ServerRequests, CommandsOutOfRangeAreRefused) {
   EXPECT_THROW(check_step_count(1000001), kj::Exception);
   EXPECT_THROW(check_subscriber_rate(-1.0), kj::Exception);
   EXPECT_NO_THROW(check_subscriber_rate(0.0));
+  EXPECT_EQ(check_queued("setForce", 12), 12u);
+  try {
+    check_queued("setForce", 0);  // Simulation::enqueue found the queue full
+    ADD_FAILURE() << "a full queue was not refused";
+  } catch (const kj::Exception& e) {
+    EXPECT_STREQ(e.getDescription().cStr(), "setForce: command queue full (4096 commands pending)");
+  }
 }
 
 }  // namespace

@@ -45,9 +45,9 @@ int main(int argc, char** argv) {
       auto value = [&] { return args.value(); };
       if (arg == "--scene") scene_file = value();
       else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
-      else if (arg == "--force") force = std::stod(value());
-      else if (arg == "--duration") duration = std::stod(value());
-      else if (arg == "--tolerance") tolerance = std::stod(value());
+      else if (arg == "--force") force = args.number();
+      else if (arg == "--duration") duration = args.number();
+      else if (arg == "--tolerance") tolerance = args.number();
       else if (arg == "--json") json = true;
       else if (arg == "--quiet") quiet = true;
       else if (arg == "--help" || arg == "-h") {

@@ -100,7 +100,7 @@ int main(int argc, char** argv) {
       else if (arg == "--json") json = true;
       else if (arg == "--csv") csv_file = value();
       else if (arg == "--quiet") quiet = true;
-      else if (arg == "--trace") trace_interval = std::stod(value());
+      else if (arg == "--trace") trace_interval = args.number();
       else if (arg == "--log-level") log_level = value();
       else if (arg == "--solve") {
         const std::string mode = value();

@@ -3,6 +3,7 @@
 // stdout line), driven by real Cap'n Proto clients.
 #include <fcntl.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <signal.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
@@ -14,6 +15,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <mutex>
 #include <random>
@@ -98,19 +100,8 @@ class ServerProcess {
   pid_t pid() const { return pid_; }
   std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
   bool alive() const { return kill(pid_, 0) == 0 && waitpid(pid_, nullptr, WNOHANG) == 0; }
-  long rss_kb() const {
-    std::ifstream f("/proc/" + std::to_string(pid_) + "/status");
-    std::string key;
-    long value = -1;
-    while (f >> key) {
-      if (key == "VmRSS:") {
-        f >> value;
-        break;
-      }
-      std::getline(f, key);
-    }
-    return value;
-  }
+  long rss_kb() const { return status_field("VmRSS:"); }
+  long threads() const { return status_field("Threads:"); }
   // SIGTERM; the exit status, or -1 if it did not exit within the timeout.
   int terminate(std::chrono::milliseconds timeout) {
     kill(pid_, SIGTERM);
@@ -127,6 +118,20 @@ class ServerProcess {
   }
 
  private:
+  long status_field(const std::string& name) const {
+    std::ifstream f("/proc/" + std::to_string(pid_) + "/status");
+    std::string key;
+    long value = -1;
+    while (f >> key) {
+      if (key == name) {
+        f >> value;
+        break;
+      }
+      std::getline(f, key);
+    }
+    return value;
+  }
+
   pid_t pid_ = -1;
   int stdout_fd_ = -1;
   int port_ = 0;
@@ -143,6 +148,71 @@ class ServerEnvironment : public ::testing::Environment {
     delete g_server;
     g_server = nullptr;
   }
+};
+
+// Another program run to its end: exit status (-1 if killed at the timeout), stdout, stderr.
+struct ProgramResult {
+  int status = -1;
+  std::string out, err;
+};
+
+ProgramResult run_program(const std::vector<std::string>& args, std::chrono::seconds timeout) {
+  int out[2], err[2];
+  if (pipe(out) != 0 || pipe(err) != 0) std::abort();
+  const pid_t pid = fork();
+  if (pid == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    dup2(out[1], STDOUT_FILENO);
+    dup2(err[1], STDERR_FILENO);
+    for (int fd : {out[0], out[1], err[0], err[1]}) close(fd);
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  close(out[1]);
+  close(err[1]);
+  ProgramResult r;
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  bool open[2] = {true, true};
+  const int fds[2] = {out[0], err[0]};
+  std::string* text[2] = {&r.out, &r.err};
+  while ((open[0] || open[1]) && std::chrono::steady_clock::now() < deadline) {
+    pollfd p[2] = {{fds[0], POLLIN, 0}, {fds[1], POLLIN, 0}};
+    if (poll(p, 2, 100) <= 0) continue;
+    for (int k = 0; k < 2; ++k) {
+      if (!open[k] || !(p[k].revents & (POLLIN | POLLHUP))) continue;
+      char buf[4096];
+      const ssize_t n = read(fds[k], buf, sizeof buf);
+      if (n > 0) text[k]->append(buf, static_cast<size_t>(n));
+      else open[k] = false;
+    }
+  }
+  int status = 0;
+  pid_t done = 0;
+  while ((done = waitpid(pid, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  if (done == pid) {
+    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  } else {
+    kill(pid, SIGKILL);  // our child, still running at the timeout
+    waitpid(pid, nullptr, 0);
+  }
+  close(out[0]);
+  close(err[0]);
+  return r;
+}
+
+// A temporary folder of scene files, removed at the end.
+struct SceneFolder {
+  SceneFolder() : dir("/tmp/palpate-e2e-" + std::to_string(getpid())) { std::filesystem::create_directories(dir); }
+  ~SceneFolder() { std::filesystem::remove_all(dir); }
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream(dir + "/" + name) << text;
+    return dir + "/" + name;
+  }
+  std::string dir;
 };
 
 // ---------------------------------------------------------------------------
@@ -648,6 +718,128 @@ TEST(ServerE2E, GarbageBytesAndConnectionChurn) {
   auto list = list_response.getNames();
   EXPECT_GE(list.size(), 1u);
   EXPECT_TRUE(g_server->alive());
+}
+
+// openSession validates, reads and builds on the session's thread: the RPC thread
+// keeps serving everyone meanwhile, and a client that leaves while its session is
+// still building costs nothing (no join on the RPC thread) and leaves nothing behind.
+TEST(ServerE2E, ASessionStillBuildingNeverBlocksOthersAndIsFreedWhenItsClientLeaves) {
+  Client other;  // an unrelated client, measured throughout
+  // The sessions of earlier tests close as the server notices their clients left.
+  for (int k = 0; k < 100 && g_server->threads() > 1; ++k) other.pump(50);
+  const long baseline = g_server->threads();
+  double while_building = 0;
+  auto worst_round_trip = [&other](std::chrono::milliseconds window) {
+    double worst = 0;
+    const auto end = std::chrono::steady_clock::now() + window;
+    while (std::chrono::steady_clock::now() < end) {
+      const auto t0 = std::chrono::steady_clock::now();
+      other.server.versionRequest().send().wait(other.ws());
+      worst = std::max(worst, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      other.pump(5);
+    }
+    return worst;
+  };
+  {
+    auto leaving = std::make_unique<Client>();
+    auto req = leaving->server.openSessionRequest();
+    auto r = req.initRequest();
+    r.getScene().setName("hertz_cube_graded");  // consistent integration: about 2 s to build at 17^3
+    r.initOverrides(1).set(0, "body.distribution.per_edge=17");
+    r.setHeadless(true);
+    auto pending = req.send();
+    while_building = worst_round_trip(std::chrono::milliseconds(300));
+    EXPECT_LT(while_building, 250.0) << "the RPC thread waited for a session's start";
+    EXPECT_GT(g_server->threads(), baseline) << "the session's thread is building";
+    // The client goes, its openSession unanswered.
+  }
+  const double after_leaving = worst_round_trip(std::chrono::milliseconds(300));
+  EXPECT_LT(after_leaving, 250.0) << "the RPC thread joined a session still building";
+  const long threads_after_leaving = g_server->threads();
+  // The abandoned start ends by itself and its thread is joined and freed.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (g_server->threads() > baseline && std::chrono::steady_clock::now() < deadline) other.pump(50);
+  EXPECT_LE(g_server->threads(), baseline) << "the abandoned session's thread was not freed";
+  std::printf("worst version() round trip %.1f ms while a session builds, %.1f ms after its client left "
+              "(%ld server threads then, %ld now)\n",
+              while_building, after_leaving, threads_after_leaving, g_server->threads());
+  auto session = other.open(true);  // the server still opens sessions
+  auto step = session.stepRequest();
+  step.setN(5);
+  EXPECT_EQ(step.send().wait(other.ws()).getFrame().getTick(), 5);
+}
+
+// The default scene is validated (file reads included) and built before the server
+// listens: a broken one stops it with status 1 and the message of the scene error.
+TEST(ServerE2E, ABrokenDefaultSceneStopsTheServerBeforeItListens) {
+  SceneFolder folder;
+  std::string nodes;
+  for (int k = 0; k < 27; ++k)
+    nodes += std::to_string(k % 3 - 1) + " " + std::to_string(k / 3 % 3 - 1) + " " + std::to_string(k / 9 - 2) + "\n";
+  folder.write("cloud.txt", nodes);
+  const struct {
+    std::string file, expected;
+    std::vector<std::string> extra;
+  } cases[] = {
+      {folder.write("poisson.json", R"({"material": {"poisson_ratio": 0.7}})"),
+       "poisson.json: /material/poisson_ratio: must be a number in (-1, 0.5), got 0.7", {}},
+      {folder.write("no_nodes.json", R"({"body": {"distribution": {"type": "node_file", "node_file": "gone.txt"}}})"),
+       "no_nodes.json: /body/distribution/node_file: node file 'gone.txt' not found", {}},
+      {folder.write("unstable.json", R"({"integrator": {"dt": 0.5}})"),
+       "unstable.json: /integrator/dt: 0.5 s is outside the measured stable envelope", {}},
+      {folder.write("too_many.json", R"({"body": {"distribution": {"type": "node_file", "node_file": "cloud.txt"}}})"),
+       "cloud.txt' lists more than 8 nodes, this server's particle limit", {"--max-particles", "8"}},
+      {folder.dir + "/absent.json", "absent.json: cannot read file", {}},
+  };
+  for (const auto& c : cases) {
+    std::vector<std::string> args = {PALPATE_SERVER_BIN, "--listen", "127.0.0.1:0", "--scene", c.file};
+    args.insert(args.end(), c.extra.begin(), c.extra.end());
+    const ProgramResult r = run_program(args, std::chrono::seconds(60));
+    EXPECT_EQ(r.status, 1) << c.file << ": " << r.err;
+    EXPECT_EQ(r.out.find("listening"), std::string::npos) << c.file << ": " << r.out;
+    EXPECT_NE(r.err.find("palpate-server: --scene: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(c.expected), std::string::npos) << "expected '" << c.expected << "' in: " << r.err;
+  }
+}
+
+// The network programs share the argument helper (cli/arguments.h): --help prints the
+// whole usage on stdout and exits 0; garbage values are refused with exit 2.
+TEST(ServerE2E, ProgramsPrintTheirUsageAndRefuseGarbage) {
+  const struct {
+    std::string bin, name;
+  } programs[] = {{PALPATE_SERVER_BIN, "palpate-server"},
+                  {PALPATE_CLIENT_BIN, "palpate-client"},
+                  {PALPATE_BENCH_SERVER_BIN, "palpate-bench-server"}};
+  for (const auto& p : programs) {
+    for (const std::string help : {"--help", "-h"}) {
+      const ProgramResult r = run_program({p.bin, help}, std::chrono::seconds(20));
+      EXPECT_EQ(r.status, 0) << p.name << " " << help << ": " << r.err;
+      EXPECT_EQ(r.out.rfind("usage: " + p.name + " [options]\n", 0), 0u) << r.out;
+      EXPECT_NE(r.out.find("--rate HZ"), std::string::npos) << r.out;
+      EXPECT_NE(r.out.find("Exit status"), std::string::npos) << r.out;
+      EXPECT_EQ(r.err, "");
+    }
+    const ProgramResult garbage = run_program({p.bin, "--rate", "abc"}, std::chrono::seconds(20));
+    EXPECT_EQ(garbage.status, 2) << p.name;
+    EXPECT_EQ(garbage.err.rfind(p.name + ": --rate: 'abc' is not a number\n\nusage: " + p.name, 0), 0u)
+        << garbage.err;
+    EXPECT_EQ(garbage.out, "");
+    const ProgramResult unknown = run_program({p.bin, "--frobnicate"}, std::chrono::seconds(20));
+    EXPECT_EQ(unknown.status, 2) << p.name;
+    EXPECT_NE(unknown.err.find("unknown option '--frobnicate'"), std::string::npos) << unknown.err;
+    const ProgramResult missing = run_program({p.bin, "--rate"}, std::chrono::seconds(20));
+    EXPECT_EQ(missing.status, 2) << p.name;
+    EXPECT_NE(missing.err.find("--rate needs a value"), std::string::npos) << missing.err;
+  }
+  const ProgramResult steps = run_program({PALPATE_CLIENT_BIN, "--max-steps", "1.5"}, std::chrono::seconds(20));
+  EXPECT_EQ(steps.status, 2);
+  EXPECT_NE(steps.err.find("--max-steps: '1.5' is not an integer"), std::string::npos) << steps.err;
+  const ProgramResult seconds = run_program({PALPATE_BENCH_SERVER_BIN, "--seconds", "3s"}, std::chrono::seconds(20));
+  EXPECT_EQ(seconds.status, 2);
+  EXPECT_NE(seconds.err.find("--seconds: '3s' is not a number"), std::string::npos) << seconds.err;
+  const ProgramResult level = run_program({PALPATE_SERVER_BIN, "--log-level", "loud"}, std::chrono::seconds(20));
+  EXPECT_EQ(level.status, 2);
+  EXPECT_NE(level.err.find("--log-level: 'loud' is not one of"), std::string::npos) << level.err;
 }
 
 }  // namespace
