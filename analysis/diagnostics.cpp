@@ -12,7 +12,7 @@
 namespace palpate {
 
 double kinetic_energy(const Model& model, const Options& opt, const State& state) {
-  double e = 0.5 * opt.indenter_mass * state.indenter_velocity * state.indenter_velocity;
+  double e = 0.5 * opt.indenter_mass * state.indenter_velocity.squaredNorm();
   for (int i = 0; i < model.particle_count; ++i)
     if (model.inverse_mass[i] != 0.0) e += 0.5 * model.mass[i] * state.velocity.col(i).squaredNorm();
   return e;

@@ -14,7 +14,8 @@ namespace palpate {
 double max_particle_speed(const State& state);
 
 // Equilibrium (docs/physics.md §2): over a window of `window` seconds of simulated time
-// the contact force balanced the command to force_tolerance (relative) at every
+// the contact force on the tool balanced the command (|F_contact + F_command| relative
+// to |F_command|) to force_tolerance at every
 // step, and no particle and not the indenter moved more than
 // velocity_tolerance * window (a mean speed below velocity_tolerance). Judging
 // displacements rather than instantaneous speeds ignores the O(dt^3) velocity
@@ -22,8 +23,9 @@ double max_particle_speed(const State& state);
 class RestMonitor {
  public:
   explicit RestMonitor(const RestSpec& spec) : spec_(spec) {}
-  // Call after every step of length dt (s); true once the criteria have held over a whole window.
-  bool update(const State& state, double dt);
+  // Call after every step taken with `opt`; true once the criteria have held over a
+  // whole window. The balance is judged on the axes the tool has (a guide takes the rest).
+  bool update(const State& state, const Options& opt);
   void reset() { held_ = -1.0; }
 
  private:
@@ -31,10 +33,10 @@ class RestMonitor {
   RestSpec spec_;
   double held_ = -1.0;  // s since the window started, < 0: no window open
   Points window_start_position_;
-  double window_start_indenter_ = 0.0;
+  Vec3 window_start_indenter_{0, 0, 0};
 };
 
-// Presses the indenter with `force` from the current state and steps until
+// Presses the indenter down (-z) with `force` from the current state and steps until
 // RestMonitor reports rest, a health check fails (health.h), or rest.max_time of
 // simulated time has passed (the quasi-static loading of palpate-verify). On a
 // failed check the state is put back to the last good one (saved every 100 steps)
@@ -64,7 +66,7 @@ template <class Observer>
 PressResult press_to_rest(const Model& model, const Options& opt, const RestSpec& spec, State& state, double force,
                           Observer&& observer) {
   RestMonitor rest(spec);
-  state.force_command = force;
+  state.force_command = press_down(force);
   Checkpoint last_good(state);
   PressResult result;
   const long max_steps = static_cast<long>(std::ceil(spec.max_time / opt.integrator.dt));
@@ -79,7 +81,7 @@ PressResult press_to_rest(const Model& model, const Options& opt, const RestSpec
     }
     observer(state);
     if (result.steps % 100 == 0) last_good.save(state);
-    result.at_rest = rest.update(state, opt.integrator.dt);
+    result.at_rest = rest.update(state, opt);
   }
   result.indentation = indentation(model, state);
   return result;

@@ -26,7 +26,7 @@ std::string definition(const TrialSpec& s) {
 
 Trial run_trial(const Model& model, const Options& opt, const TrialSpec& spec) {
   State state = make_state(model, opt);
-  state.force_command = spec.force;
+  state.force_command = press_down(spec.force);
   const double dt = opt.integrator.dt;
   const double R = model.indenter_radius;
   const double z0 = state.indenter_center[2];

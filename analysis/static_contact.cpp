@@ -191,8 +191,8 @@ struct LinearStaticContact::Impl {
         if (free_dof[3 * i + c] >= 0) state.position(c, i) += u[free_dof[3 * i + c]];
     state.velocity.setZero();
     state.indenter_center = Vec3(model.indenter_start[0], model.indenter_start[1], model.touch_height - d);
-    state.indenter_velocity = 0.0;
-    state.force_command = force;
+    state.indenter_velocity.setZero();
+    state.force_command = press_down(force);
     state.contact_index.clear();
     state.contact_normal_force.clear();
     for (size_t a = 0; a < active.size(); ++a) {
@@ -200,7 +200,7 @@ struct LinearStaticContact::Impl {
       state.contact_index.push_back(candidate[active[a]]);
       state.contact_normal_force.push_back(p[a]);
     }
-    state.indenter_contact_force = p.sum();
+    state.indenter_contact_force = Vec3(0, 0, p.sum());
   }
 };
 
@@ -230,7 +230,7 @@ StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestS
   relax.integrator.type = IntegratorType::implicit_euler;
   relax.integrator.damping = 0.0;
   relax.indenter_mass = std::max(opt.indenter_mass, std::accumulate(model.mass.begin(), model.mass.end(), 0.0));
-  state.force_command = force;
+  state.force_command = press_down(force);
   double& dt = relax.integrator.dt;
   const double dt_max = 1e4, dt_min = 1e-9;
   Points f(3, model.particle_count);
@@ -240,10 +240,10 @@ StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestS
     double r = 0.0;
     for (int i = 0; i < model.particle_count; ++i)
       if (!model.fixed[i]) r = std::max(r, f.col(i).norm());
-    return std::max(r, std::abs(s.indenter_contact_force - force));
+    return std::max(r, (s.indenter_contact_force + s.force_command).cwiseProduct(tool_axes(relax)).norm());
   };
   state.velocity.setZero();
-  state.indenter_velocity = 0.0;
+  state.indenter_velocity.setZero();
   double residual = residual_of(state);
   const double target = residual_tolerance * std::max(force, 1e-300);
   int rejected_in_a_row = 0;
@@ -251,12 +251,12 @@ StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestS
   for (int k = 0; k < max_steps && residual > target; ++k) {
     accepted.save(state);
     state.velocity.setZero();
-    state.indenter_velocity = 0.0;
+    state.indenter_velocity.setZero();
     const StepStatus status = step(model, relax, state);
     out.iterations = k + 1;
     const double next = status == StepStatus::non_finite ? INFINITY : residual_of(state);
     spdlog::debug("relax_to_rest: step {} dt {:.3g} s residual {:.3e} N d {:.6f} m contact {:.4f} N ({} nodes)", k, dt,
-                  next, indentation(model, state), state.indenter_contact_force, state.contact_index.size());
+                  next, indentation(model, state), state.indenter_contact_force[2], state.contact_index.size());
     if (!(next < residual)) {  // reject: restore and halve the step
       accepted.restore(state);
       dt *= 0.5;
@@ -268,7 +268,7 @@ StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestS
     dt = std::min(dt_max, 2.0 * dt);
   }
   state.velocity.setZero();
-  state.indenter_velocity = 0.0;
+  state.indenter_velocity.setZero();
   // The continuation's energy bookkeeping (its heavy indenter) is not the caller's.
   reset_health(model, opt, state);
   out.converged = residual <= target;
@@ -280,7 +280,7 @@ StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestS
     if (!press.at_rest) out.message = "neither the continuation nor the dynamic settle reached rest";
   }
   out.indentation = indentation(model, state);
-  out.contact_force = state.indenter_contact_force;
+  out.contact_force = state.indenter_contact_force[2];
   out.active_count = static_cast<int>(state.contact_index.size());
   return out;
 }

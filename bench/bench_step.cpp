@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
 
   // Press the indenter in with RK4 until it touches.
   State pressed = make_state(model, rk4_opt);
-  pressed.force_command = press_force;
+  pressed.force_command = press_down(press_force);
   int pressing = 0;
   auto too_few = [&] { return static_cast<int>(pressed.contact_index.size()) < min_contacts; };
   for (; pressing < press_steps || (too_few() && pressing < 20 * press_steps); ++pressing) {

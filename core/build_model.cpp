@@ -311,6 +311,23 @@ void set_boundary_and_indenter(Model& m, const Scene& scene) {
   // strain-free sinking between them.
   m.touch_height = surface + m.indenter_radius;
   if (!scene.indenter.position_given) m.indenter_start[2] = first_contact;
+  // The tool's workspace.
+  const Vec3 margin = Vec3::Constant(2 * m.indenter_radius);
+  const Vec3 body_min = X.rowwise().minCoeff() - margin, body_max = X.rowwise().maxCoeff() + margin;
+  for (int a = 0; a < 3; ++a) {
+    const double lo = scene.indenter.workspace_min[a], hi = scene.indenter.workspace_max[a];
+    // A derived corner also takes in the start, so a scene that parks the tool away keeps it there.
+    m.tool_workspace_min[a] = std::isfinite(lo) ? lo : std::min(body_min[a], m.indenter_start[a]);
+    m.tool_workspace_max[a] = std::isfinite(hi) ? hi : std::max(body_max[a], m.indenter_start[a]);
+  }
+  if (!(m.tool_workspace_max.array() > m.tool_workspace_min.array()).all())
+    throw SceneError(scene.source, "/indenter/workspace_max",
+                     "the tool's workspace is empty (workspace_max must exceed workspace_min, or the corner derived "
+                     "from the body, in every component)");
+  if ((m.indenter_start.array() < m.tool_workspace_min.array()).any() ||
+      (m.indenter_start.array() > m.tool_workspace_max.array()).any())
+    throw SceneError(scene.source, "/indenter/workspace_min",
+                     "the indenter starts outside its workspace (the box of workspace_min and workspace_max)");
   if (m.indenter_start[2] < first_contact - 1e-12)
     throw SceneError(scene.source, "/indenter/position",
                      "the indenter starts inside the body (its centre must be at z >= " +

@@ -13,7 +13,8 @@ Checkpoint::Checkpoint(const State& s) : saved_(static_cast<const CarriedState&>
 void Checkpoint::save(const State& s) { saved_ = static_cast<const CarriedState&>(s); }
 
 void Checkpoint::restore(State& s) const {
-  const double time = s.time, force_command = s.force_command;
+  const double time = s.time;
+  const Vec3 force_command = s.force_command;
   const int64_t tick = s.tick;
   static_cast<CarriedState&>(s) = saved_;
   s.time = time;

@@ -151,16 +151,17 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   for (int a = 0; a < m; ++a) work.candidate_slot[candidate[a]] = -1;
   state.contact_index.clear();
   state.contact_normal_force.clear();
-  state.indenter_contact_force = 0.0;
+  state.indenter_contact_force.setZero();
   state.out.contact_iterations = 0;
   state.out.contact_max_penetration = 0.0;
   if (m == 0) return StepStatus::ok;
 
-  // Delassus operator W = dt^2 J M^-1 J^T, the sphere's vertical column included:
-  // W_ab = dt^2 [ n_a . (response of particle a to a unit force n_b on b) + a_a a_b / M ],
-  // a_a = n_a . e_z.
+  // Delassus operator W = dt^2 J M^-1 J^T, the sphere's translations included:
+  // W_ab = dt^2 [ n_a . (response of particle a to a unit force n_b on b) + n_a . P n_b / M ],
+  // P = diag(tool_axes): the axes the tool moves along (a guided axis has infinite mass).
   const double dt2 = dt * dt;
   const double inv_sphere_mass = 1.0 / opt.indenter_mass;
+  const Vec3 axes = tool_axes(opt);
   work.delassus.resize(static_cast<size_t>(m) * m);
   double* W = work.delassus.data();
   if (coupled) {
@@ -181,14 +182,15 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
       for (int b = 0; b < m; ++b) W[a * m + b] = (a == b) ? dt2 * model.inverse_mass[candidate[a]] : 0.0;
   }
   for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b) W[a * m + b] += dt2 * inv_sphere_mass * work.normal(2, a) * work.normal(2, b);
+    for (int b = 0; b < m; ++b)
+      W[a * m + b] += dt2 * inv_sphere_mass * work.normal.col(a).dot(axes.cwiseProduct(work.normal.col(b)));
 
   // Replaces the previous contact forces (held over the free motion) by `total`:
-  // particles += gain M^-1 (total_a n_a - f_prev,a), indenter likewise with the
-  // reactions. Returns the indenter's z contact force of `total`.
+  // particles += gain M^-1 (total_a n_a - f_prev,a), the tool likewise with the
+  // reactions. Returns the contact force of `total` on the tool.
   const double* previous = work.previous_multiplier.data();
-  auto apply = [&](const double* total, double gain, Points& particles, double& indenter) {
-    double sphere_force = 0.0, sphere_previous = 0.0;
+  auto apply = [&](const double* total, double gain, Points& particles, Vec3& indenter) {
+    Vec3 sphere_force = Vec3::Zero(), sphere_previous = Vec3::Zero();
     for (int a = 0; a < m; ++a) {
       const int i = candidate[a];
       const Vec3 f = total[a] * work.normal.col(a);
@@ -198,10 +200,10 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
         Eigen::Map<const Points> response(work.contact_response.data() + 3 * static_cast<size_t>(n) * a, 3, n);
         particles += (gain * (total[a] - previous[a])) * response;
       }
-      sphere_force -= f[2];
-      sphere_previous -= work.previous_force(2, a);
+      sphere_force -= f;
+      sphere_previous -= work.previous_force.col(a);
     }
-    indenter += gain * inv_sphere_mass * (sphere_force - sphere_previous);
+    indenter += gain * inv_sphere_mass * axes.cwiseProduct(sphere_force - sphere_previous);
     return sphere_force;
   };
   // The LCPs are posed in the total multipliers: g' = (g - W p) + W lambda, p the previous ones.
@@ -217,7 +219,7 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   int iterations = solve_signorini_lcp(m, W, work.gap.data(), lambda, tolerance, max_iterations, work);
   bool converged = iterations >= 0;
   state.out.contact_iterations = std::max(iterations, 0);
-  apply(lambda, dt2, state.position, state.indenter_center[2]);
+  apply(lambda, dt2, state.position, state.indenter_center);
 
   // Gaps after the projection: who is touching, and the penetration left.
   for (int a = 0; a < m; ++a) {
@@ -229,10 +231,10 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
 
   // 2. Velocity projection on the touching particles; the others are given an
   // infinite separating velocity so that the LCP leaves them at zero force.
-  // u_a = n_a . (v_i - v_indenter e_z), posed as u dt with W (= W_v dt).
+  // u_a = n_a . (v_i - v_tool), posed as u dt with W (= W_v dt).
   for (int a = 0; a < m; ++a) {
     const bool touching = work.gap[a] <= 10 * tolerance;
-    const Vec3 v_rel = state.velocity.col(candidate[a]) - Vec3(0, 0, state.indenter_velocity);
+    const Vec3 v_rel = state.velocity.col(candidate[a]) - state.indenter_velocity;
     work.gap[a] = work.normal.col(a).dot(v_rel) * dt;
     if (!touching) work.gap[a] = INFINITY;
   }

@@ -28,7 +28,7 @@ EnergyPass energy_pass(const Model& model, const Options& opt, const State& stat
   EnergyPass e;
   // Flat, vectorisable reductions over the 3 x n arrays the step has just written.
   e.kinetic = 0.5 * state.velocity.colwise().squaredNorm().dot(mass.transpose()) +
-              0.5 * opt.indenter_mass * state.indenter_velocity * state.indenter_velocity;
+              0.5 * opt.indenter_mass * state.indenter_velocity.squaredNorm();
   e.position_sum = state.position.sum();
   const Vec3& g = opt.gravity;
   if (g.squaredNorm() > 0) {  // a plain loop: the matrix product would allocate a 1 x n temporary
@@ -68,7 +68,7 @@ void reset_health(const Model& model, const Options& opt, State& state) {
   h.energy_input = e.kinetic + strain;
   h.energy_budget = h.energy_input;
   h.kinetic_energy = e.kinetic;
-  h.indenter_z = state.indenter_center[2];
+  h.indenter_position = state.indenter_center;
   h.gravity_potential = e.gravity_potential;
   h.inversion_cursor = 0;
 }
@@ -83,28 +83,29 @@ StepStatus check_health(const Model& model, const Options& opt, State& state, St
   EnergyPass e;
   StepOutputs& out = state.out;
   if (out.free_motion_sums_valid && opt.gravity.squaredNorm() == 0) {
-    e.kinetic = out.free_motion_kinetic + 0.5 * opt.indenter_mass * state.indenter_velocity * state.indenter_velocity;
+    e.kinetic = out.free_motion_kinetic + 0.5 * opt.indenter_mass * state.indenter_velocity.squaredNorm();
     e.position_sum = out.free_motion_position_sum;
   } else {
     e = energy_pass(model, opt, state);
   }
   out.free_motion_sums_valid = false;
-  if (!std::isfinite(e.kinetic + e.position_sum + state.indenter_center.sum() + state.indenter_contact_force))
+  if (!std::isfinite(e.kinetic + e.position_sum + state.indenter_center.sum() + state.indenter_contact_force.sum() +
+                     state.indenter_velocity.sum()))
     return fail(state, StepStatus::non_finite, -1, NAN, 0.0);
   if (status != StepStatus::ok) return fail(state, status, -1, 0.0, 0.0);
 
-  // Energy: work of the command (pressing down, -z) and of gravity since the last check.
-  const double z = state.indenter_center[2];
-  h.energy_input += state.force_command * (h.indenter_z - z) + (e.gravity_potential - h.gravity_potential);
+  // Energy: work of the command (F . travel of the tool) and of gravity since the last check.
+  const Vec3& c = state.indenter_center;
+  h.energy_input += state.force_command.dot(c - h.indenter_position) + (e.gravity_potential - h.gravity_potential);
   h.energy_budget = std::max(h.energy_budget, h.energy_input);
-  h.indenter_z = z;
+  h.indenter_position = c;
   h.gravity_potential = e.gravity_potential;
   h.kinetic_energy = e.kinetic;
   const double energy_limit = limits.energy_factor * h.energy_budget + limits.energy_floor;
   if (e.kinetic > energy_limit) return fail(state, StepStatus::energy_jump, -1, e.kinetic, energy_limit);
 
-  if (std::abs(state.indenter_velocity) > limits.max_indenter_speed)
-    return fail(state, StepStatus::indenter_speed, -1, std::abs(state.indenter_velocity), limits.max_indenter_speed);
+  if (const double speed = state.indenter_velocity.norm(); speed > limits.max_indenter_speed)
+    return fail(state, StepStatus::indenter_speed, -1, speed, limits.max_indenter_speed);
 
   // Penetration: the true gap |x_i - c| - R of this step's contact candidates.
   const double R = model.indenter_radius;

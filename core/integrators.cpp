@@ -75,17 +75,33 @@ void particle_accelerations(const Model& model, const Options& opt, const State&
     acceleration.col(i) = accel(i, force.col(i).data(), v.col(i).data());
 }
 
-double indenter_free_acceleration(const Options& opt, const State& state) {
-  return (state.indenter_contact_force - state.force_command) / opt.indenter_mass + opt.gravity[2];
+Vec3 indenter_free_acceleration(const Options& opt, const State& state) {
+  const Vec3 a = (state.indenter_contact_force + state.force_command) / opt.indenter_mass + opt.gravity;
+  return a.cwiseProduct(tool_axes(opt));  // a guided axis takes no acceleration
+}
+
+void keep_tool_in_workspace(const Model& model, State& state) {
+  for (int a = 0; a < 3; ++a) {
+    double& c = state.indenter_center[a];
+    double& v = state.indenter_velocity[a];
+    if (c < model.tool_workspace_min[a]) {
+      c = model.tool_workspace_min[a];
+      v = std::max(v, 0.0);
+    } else if (c > model.tool_workspace_max[a]) {
+      c = model.tool_workspace_max[a];
+      v = std::min(v, 0.0);
+    }
+  }
 }
 
 namespace {
 
 // The indenter under a constant force over the step, integrated exactly.
-void indenter_free_motion(const Options& opt, State& state, double dt) {
-  const double a = indenter_free_acceleration(opt, state);
-  state.indenter_center[2] += dt * state.indenter_velocity + 0.5 * dt * dt * a;
+void indenter_free_motion(const Model& model, const Options& opt, State& state, double dt) {
+  const Vec3 a = indenter_free_acceleration(opt, state);
+  state.indenter_center += dt * state.indenter_velocity + 0.5 * dt * dt * a;
   state.indenter_velocity += dt * a;
+  keep_tool_in_workspace(model, state);
 }
 
 }  // namespace
@@ -223,7 +239,7 @@ void free_motion_rk4(const Model& model, const Options& opt, State& state) {
                          dt / 6.0, &sums};
   for_each_acceleration(model, opt, w.force.data(), v_stage.data(), update);
   sums.write(state.out);
-  indenter_free_motion(opt, state, dt);
+  indenter_free_motion(model, opt, state, dt);
 }
 
 void free_motion_symplectic_euler(const Model& model, const Options& opt, State& state) {
@@ -236,7 +252,8 @@ void free_motion_symplectic_euler(const Model& model, const Options& opt, State&
   for_each_acceleration(model, opt, w.force.data(), state.velocity.data(), update);
   sums.write(state.out);
   state.indenter_velocity += dt * indenter_free_acceleration(opt, state);
-  state.indenter_center[2] += dt * state.indenter_velocity;
+  state.indenter_center += dt * state.indenter_velocity;
+  keep_tool_in_workspace(model, state);
 }
 
 namespace {
@@ -370,7 +387,8 @@ void free_motion_implicit_euler(const Model& model, const Options& opt, State& s
   state.velocity += w.dv;
   state.position += dt * state.velocity;
   state.indenter_velocity += dt * indenter_free_acceleration(opt, state);
-  state.indenter_center[2] += dt * state.indenter_velocity;
+  state.indenter_center += dt * state.indenter_velocity;
+  keep_tool_in_workspace(model, state);
 }
 
 }  // namespace palpate

@@ -21,8 +21,13 @@ void add_contact_forces(const State& state, Points& force);
 void particle_accelerations(const Model& model, const Options& opt, const State& state, const Points& x,
                             const Points& v, Points& force_scratch, Points& acceleration);
 
-// Indenter acceleration along z: (F_contact,previous - F_command) / M + g_z.
-double indenter_free_acceleration(const Options& opt, const State& state);
+// The tool's free acceleration: (F_contact,previous + F_command) / M + g on the axes the
+// tool has (tool_axes), 0 on the ones its guide holds.
+Vec3 indenter_free_acceleration(const Options& opt, const State& state);
+
+// Puts a tool centre outside Model's tool workspace back on its boundary and removes
+// the outward component of its velocity (the free motion's last stage).
+void keep_tool_in_workspace(const Model& model, State& state);
 
 // Classical fourth-order Runge-Kutta on (x, v) (the paper's integrator).
 void free_motion_rk4(const Model& model, const Options& opt, State& state);

@@ -79,7 +79,12 @@ struct Model {
   // Indenter (its mass is an option: Options::indenter_mass).
   double indenter_radius = 0.0;   // m
   Vec3 indenter_start{0, 0, 0};   // initial centre, m
-  double initial_force_command = 0.0;  // N, the scene's indenter.force: State::force_command at rest
+  double initial_force_command = 0.0;  // N pressing down, the scene's indenter.force: State::force_command
+                                       // = press_down(it) at rest
+  // The box the tool's centre is kept in (scene indenter.workspace; default: the body's
+  // bounding box grown by two radii on every side), m. A centre that the free motion
+  // takes outside is put back on the box, and its outward velocity removed.
+  Vec3 tool_workspace_min{0, 0, 0}, tool_workspace_max{0, 0, 0};
   double touch_height = 0.0;      // z of the centre when the sphere touches the undeformed surface
                                   // (the highest particle under it) with its lowest point, m
 

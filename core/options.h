@@ -21,7 +21,14 @@ struct Options {
   // how the sphere answers its command (a quasi-static solve makes it heavy; a
   // haptic coupling tunes it) and no precomputed quantity depends on it.
   double indenter_mass = 1.0;
+  ToolGuide tool_guide = ToolGuide::vertical;  // scene indenter.guide: which translations the tool has
 };
+
+// The translations the tool has, as the diagonal of a projection: 1 on a free axis, 0 on
+// one the guide holds (ToolGuide::vertical: z only).
+inline Vec3 tool_axes(const Options& opt) {
+  return opt.tool_guide == ToolGuide::free ? Vec3(1.0, 1.0, 1.0) : Vec3(0.0, 0.0, 1.0);
+}
 
 // The options a scene starts with.
 inline Options options_of(const Scene& scene) {
@@ -31,6 +38,7 @@ inline Options options_of(const Scene& scene) {
   o.gravity = scene.gravity;
   o.health = scene.health;
   o.indenter_mass = scene.indenter.mass;
+  o.tool_guide = scene.indenter.guide;
   return o;
 }
 

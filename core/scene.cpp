@@ -83,6 +83,11 @@ constexpr Named<VolumeRule> kVolumeRules[] = {
     {"mesh", VolumeRule::mesh},
 };
 
+constexpr Named<ToolGuide> kToolGuides[] = {
+    {"vertical", ToolGuide::vertical},
+    {"free", ToolGuide::free},
+};
+
 constexpr Named<IntegratorType> kIntegrators[] = {
     {"rk4", IntegratorType::rk4},
     {"symplectic_euler", IntegratorType::symplectic_euler},
@@ -109,7 +114,8 @@ constexpr std::string_view kMlsKeys[] = {"neighbors",   "max_neighbors", "suppor
                                          "integration", "volumes",       "hourglass",      "regularization"};
 constexpr std::string_view kHexFemKeys[] = {"formulation", "volumetric_integration"};
 constexpr std::string_view kMaterialKeys[] = {"young_modulus", "poisson_ratio", "density", "volume_stiffness", "law"};
-constexpr std::string_view kIndenterKeys[] = {"radius", "mass", "position", "force"};
+constexpr std::string_view kIndenterKeys[] = {"radius", "mass", "position", "force", "workspace_min", "workspace_max",
+                                              "guide"};
 constexpr std::string_view kContactKeys[] = {"tolerance", "max_iterations"};
 constexpr std::string_view kIntegratorKeys[] = {"type",         "dt", "damping", "cg_tolerance", "cg_max_iterations",
                                                 "allow_unstable_dt"};
@@ -550,6 +556,14 @@ void read_indenter(const Reader& r, IndenterSpec& ind) {
   r["position"].get(ind.position);
   ind.position_given = ind.position_given || r["position"].present();
   r["force"].get(ind.force, closed(-1e9, 1e9));
+  r["workspace_min"].get(ind.workspace_min);
+  r["workspace_max"].get(ind.workspace_max);
+  constexpr char kAxis[] = "xyz";
+  for (int a = 0; a < 3; ++a)  // (both given: the box must not be empty; the build checks a derived corner)
+    if (!(ind.workspace_max[a] > ind.workspace_min[a]))
+      r["workspace_max"].fail(std::string("must exceed workspace_min in every component (") + kAxis[a] + ": " +
+                              fmt(ind.workspace_max[a]) + " <= " + fmt(ind.workspace_min[a]) + ")");
+  r["guide"].get(ind.guide, "tool guide", kToolGuides);
 }
 
 void read_contact(const Reader& r, ContactSpec& c) {
@@ -750,6 +764,7 @@ std::vector<std::string> scene_field_paths() {
 }
 
 const char* to_string(IntegratorType t) { return name_for(kIntegrators, t); }
+const char* to_string(ToolGuide g) { return name_for(kToolGuides, g); }
 const char* to_string(MaterialLaw l) { return name_for(kMaterialLaws, l); }
 const char* to_string(HexFormulation f) { return name_for(kHexFormulations, f); }
 const char* to_string(DistributionType t) { return name_for(kDistributions, t); }

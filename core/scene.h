@@ -6,6 +6,7 @@
 // verification set-up out in full. Only what a scene names is built and computed.
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -37,6 +38,10 @@ enum class SupportRule { mean_distance, kth_distance };
 // integration constraint sum_i v_i g_ij = 0 at interior nodes (consistent_integration.h).
 enum class IntegrationRule { nodal, consistent };
 enum class IntegratorType { rk4, symplectic_euler, implicit_euler };
+// How the tool is held: on a vertical guide (it moves along z only, as the indenter of
+// the Hertz experiment: lateral contact forces are taken by the guide), or free in all
+// three translations (a haptic device's end effector).
+enum class ToolGuide { vertical, free };
 // The MLS solid's material law: St Venant-Kirchhoff (A-4, A-5, the paper's), or the
 // corotational linear law psi = mu |F - R|^2 + lambda/2 (tr(R^T F) - 3)^2 (F = R U), or the
 // small-strain linear law (a verification law: the continuum of the linear hex FEM).
@@ -110,6 +115,11 @@ struct IndenterSpec {
   bool position_given = false;   // false: centred over the top face, just touching it
   Vec3 position{0.0, 0.0, 0.0};  // m, initial centre when position_given
   double force = 0.0;            // N, initial commanded force pressing down (-z)
+  // The box the tool's centre is kept in, m. A corner not given (infinite) is the body's
+  // bounding box's, grown by two radii.
+  Vec3 workspace_min = Vec3::Constant(-std::numeric_limits<double>::infinity());
+  Vec3 workspace_max = Vec3::Constant(std::numeric_limits<double>::infinity());
+  ToolGuide guide = ToolGuide::vertical;
 };
 
 struct ContactSpec {
@@ -184,6 +194,7 @@ std::vector<std::string> scene_field_paths();
 
 // The scene-file names of enumerated values ("symplectic_euler").
 const char* to_string(IntegratorType);
+const char* to_string(ToolGuide);
 const char* to_string(MaterialLaw);
 const char* to_string(HexFormulation);
 const char* to_string(HexVolumetricIntegration);

@@ -60,12 +60,16 @@ struct HealthMonitor {
   double energy_input = 0.0;      // J: initial energy + work of the command and gravity so far
   double energy_budget = 0.0;     // J: the running maximum of energy_input
   double kinetic_energy = 0.0;    // J, body + indenter, at the last check
-  double indenter_z = 0.0;        // m, indenter height at the last check (work of the command)
+  Vec3 indenter_position{0, 0, 0};  // m, tool centre at the last check (work of the command)
   double gravity_potential = 0.0; // sum m_i g . x_i + M g . c at the last check (work of gravity), J
   int inversion_cursor = 0;       // first particle of the next inversion window
   int64_t inverted = 0;           // inverted particles seen (k_v > 0: tolerated, counted)
   HealthReport report;            // the last failure
 };
+
+// The command that presses the tool down (-z) with `newtons`: the one-dimensional
+// command of the Hertz experiment.
+inline Vec3 press_down(double newtons) { return Vec3(0.0, 0.0, -newtons); }
 
 // Everything one step hands to the next. Copying it (Checkpoint) saves the state; the
 // vectors keep their capacity, so a copy into a State of the same model allocates nothing.
@@ -73,9 +77,13 @@ struct CarriedState {
   Points position;  // 3 x n, x_i, m
   Points velocity;  // 3 x n, m/s
 
-  Vec3 indenter_center{0, 0, 0};  // m; moves along z only
-  double indenter_velocity = 0.0; // m/s along z
-  double force_command = 0.0;     // N pressing the indenter down (-z); the real-time input
+  // The tool: a rigid sphere with three translational degrees of freedom, kept inside
+  // the model's tool workspace (Model::tool_workspace_min/max).
+  Vec3 indenter_center{0, 0, 0};    // m
+  Vec3 indenter_velocity{0, 0, 0};  // m/s
+  // N, the external force on the tool in world coordinates: the real-time input. Pressing
+  // a top face with F newtons is (0, 0, -F) (press_down()).
+  Vec3 force_command{0, 0, 0};
 
   // The contact set of the last step (contact stage). The free motion of the next step
   // carries these forces as external forces (integrators.h).
@@ -83,7 +91,7 @@ struct CarriedState {
   std::vector<double> contact_normal_force;  // mu_i >= 0, N: the velocity-level multiplier of
                                              // particle contact_index[c] (momentum / dt, docs/physics.md §2)
   Points contact_force;                    // 3 x (capacity n): force on particle contact_index[c], N
-  double indenter_contact_force = 0.0;     // z force of the body on the indenter, N (positive up)
+  Vec3 indenter_contact_force{0, 0, 0};    // N, force of the body on the tool: -sum_c mu_c n_c
 
   double time = 0.0;  // s
   int64_t tick = 0;

@@ -30,7 +30,7 @@ StepStatus step(const Model& model, const Options& opt, State& state) {
   ++state.tick;
   if (opt.health.enabled) return check_health(model, opt, state, status);
   // Checks off: only finiteness (a NaN or Inf anywhere in the positions makes their sum non-finite).
-  if (!std::isfinite(state.position.sum() + state.indenter_center[2] + state.indenter_velocity))
+  if (!std::isfinite(state.position.sum() + state.indenter_center.sum() + state.indenter_velocity.sum()))
     return StepStatus::non_finite;
   return status;
 }

@@ -49,6 +49,10 @@ enum VolumeRule {
   lattice @1;  # lattice cell volumes
   mesh @2;     # a quarter of each incident tetrahedron (required by, and only for, mesh clouds)
 }
+enum ToolGuide {
+  vertical @0;
+  free @1;
+}
 enum IntegratorType {
   rk4 @0;
   symplecticEuler @1 $Json.name("symplectic_euler");
@@ -123,6 +127,9 @@ struct Indenter {
   mass @1 :Float64 = 1.0;          # kg, (0, 1e6]
   position @2 :List(Float64);      # [x, y, z] m; null = centred over the top face, just touching
   force @3 :Float64 = 0;           # N, [-1e9, 1e9]; initial command, pressing down when positive
+  workspaceMin @4 :List(Float64) $Json.name("workspace_min");  # [x, y, z] m; null = the body's box grown by 2 R
+  workspaceMax @5 :List(Float64) $Json.name("workspace_max");  # [x, y, z] m; null = the body's box grown by 2 R
+  guide @6 :ToolGuide = vertical;
 }
 struct Contact {
   tolerance @0 :Float64 = 1e-6;                              # m, (0, 1]

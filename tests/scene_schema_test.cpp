@@ -142,6 +142,9 @@ const Field kFields[] = {
     SCENE_FIELD("", indenter.position_given, ""),
     SCENE_FIELD("/indenter/position", indenter.position, "[0.1, 0.2, 0.5]"),
     SCENE_FIELD("/indenter/force", indenter.force, "30"),
+    SCENE_FIELD("/indenter/workspace_min", indenter.workspace_min, "[-2, -2, -3]"),
+    SCENE_FIELD("/indenter/workspace_max", indenter.workspace_max, "[2, 2, 1]"),
+    SCENE_FIELD("/indenter/guide", indenter.guide, R"("free")"),
     SCENE_FIELD("/contact/tolerance", contact.tolerance, "1e-5"),
     SCENE_FIELD("/contact/max_iterations", contact.max_iterations, "50"),
     SCENE_FIELD("/integrator/type", integrator.type, R"("implicit_euler")"),
@@ -178,7 +181,8 @@ const Field kFields[] = {
                                 regularization] = s.mls;
   [[maybe_unused]] const auto& [formulation, volumetric_integration] = s.hex_fem;
   [[maybe_unused]] const auto& [young_modulus, poisson_ratio, density, volume_stiffness, law] = s.material;
-  [[maybe_unused]] const auto& [radius, mass, position_given, position, force] = s.indenter;
+  [[maybe_unused]] const auto& [radius, mass, position_given, position, force, workspace_min, workspace_max, guide] =
+      s.indenter;
   [[maybe_unused]] const auto& [tolerance, max_iterations] = s.contact;
   [[maybe_unused]] const auto& [integrator_type, dt, damping, cg_tolerance, cg_max_iterations, allow_unstable_dt] =
       s.integrator;
@@ -191,7 +195,8 @@ const Field kFields[] = {
 // Fields whose default is not a value a scene file could write: the source's stem,
 // "no file", the top face under the indenter, the indenter just touching the body.
 const std::set<std::string> kDerivedDefaults = {"/name", "/body/distribution/focus", "/body/distribution/node_file",
-                                                "/body/distribution/file", "/indenter/position"};
+                                                "/body/distribution/file", "/indenter/position",
+                                                "/indenter/workspace_min", "/indenter/workspace_max"};
 
 // "pointer: expected vs actual" for every field where the scenes differ; empty when equal.
 std::string differences(const Scene& expected, const Scene& actual) {

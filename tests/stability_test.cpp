@@ -102,13 +102,13 @@ TEST(StabilityTest, InvertedParticlesRecoverOnlyWithTheVolumeTerm) {
   const Model base = build_model(scene);
   const Options opt = options_of(scene);
   State pressed = make_state(base, opt);
-  pressed.force_command = 6000.0;
+  pressed.force_command = press_down(6000.0);
   for (int k = 0; k < 1500; ++k) ASSERT_NE(step(base, opt, pressed), StepStatus::non_finite);
   auto release = [&](double kv) {
     Model m = base;
     m.volume_stiffness = kv;
     State s = pressed;
-    s.force_command = 0.0;
+    s.force_command.setZero();
     for (int k = 0; k < 3000; ++k) EXPECT_NE(step(m, opt, s), StepStatus::non_finite);
     return std::pair{inversion_summary(m, s.position), (s.position - m.rest_position).colwise().norm().maxCoeff()};
   };

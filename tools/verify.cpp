@@ -208,8 +208,8 @@ int main(int argc, char** argv) {
     const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, row.force, [&](const State& s) {
       if (trace_every > 0 && s.tick % trace_every == 0)
         std::fprintf(stderr, "    t = %8.3f s  d = %.6f m  contact %9.4f N (%zu particles)  v_ind = %+.2e  max v = %.2e m/s\n",
-                     s.time, indentation(model, s), s.indenter_contact_force, s.contact_index.size(),
-                     s.indenter_velocity, max_particle_speed(s));
+                     s.time, indentation(model, s), s.indenter_contact_force[2], s.contact_index.size(),
+                     s.indenter_velocity[2], max_particle_speed(s));
     });
     row.steps = press.steps;
     row.at_rest = press.at_rest;
@@ -225,7 +225,7 @@ int main(int argc, char** argv) {
       state = make_state(model, opt);  // start the next force from the rest state
     } else {
       row.d_sim = indentation(model, state);
-      row.contact_force = state.indenter_contact_force;
+      row.contact_force = state.indenter_contact_force[2];
       if (!row.at_rest) row.status = "not at rest";
     }
     rows.push_back(row);

@@ -97,7 +97,7 @@ json PhaseStats::to_json() const {
 PhaseStats run_phase(const Model& model, const Options& opt, State& state, double force, double seconds, int sample) {
   const auto t0 = Clock::now();
   PhaseStats p;
-  state.force_command = force;
+  state.force_command = press_down(force);
   const long steps = std::max(1L, std::lround(seconds / opt.integrator.dt));
   for (long k = 1; k <= steps; ++k) {
     p.steps = k;

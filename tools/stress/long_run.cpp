@@ -41,7 +41,7 @@ json long_run_study(const StressOptions& stress, json& meta, json& per_period) {
   double max_d = -INFINITY, max_speed = 0, max_energy = 0;
   std::vector<double> pt, pe;
   for (; done < steps; ++done) {
-    s.force_command = F_mid + F_amp * std::sin(2 * M_PI * s.time / period);
+    s.force_command = press_down(F_mid + F_amp * std::sin(2 * M_PI * s.time / period));
     if (step(model, opt, s) == StepStatus::non_finite) {
       finite = false;
       break;
@@ -106,7 +106,7 @@ json long_run_study(const StressOptions& stress, json& meta, json& per_period) {
     for (long k = 0; k < window; ++k) {
       step(model, opt, s);
       speed = std::max(speed, max_particle_speed(s));
-      indenter_speed = std::max(indenter_speed, std::abs(s.indenter_velocity));
+      indenter_speed = std::max(indenter_speed, s.indenter_velocity.norm());
     }
     const double travel = (s.position - x0).colwise().norm().maxCoeff();
     State fresh = make_state(model, opt);

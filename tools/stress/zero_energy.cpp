@@ -115,7 +115,7 @@ json zero_energy_study(const StressOptions& stress, json& meta, json& series, js
       for (const std::string perturbation : {"checkerboard", "noise"}) {
         const auto t0 = Clock::now();
         State s = make_state(model, opt);
-        s.force_command = 0;
+        s.force_command.setZero();
         if (perturbation == "checkerboard") {
           s.position += enveloped(model, sign, 0.01 * model.min_spacing);
         } else {
