@@ -71,7 +71,7 @@ void run_session(Scene scene) {
   }
   const double limit = server::force_limit(scene);
   for (int tick = 0; tick < kTicks; ++tick) {
-    if (tick == kTicks / 2) state.force_command = limit;   // a setForce the server accepts
+    if (tick == kTicks / 2) state.force_command = press_down(limit);   // a setForce the server accepts
     if (is_fault(step(model, opt, state))) break;          // a blow-up: the server restores a checkpoint
   }
 }

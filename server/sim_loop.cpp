@@ -29,6 +29,11 @@ int64_t now_ns() {
 
 namespace {
 
+// The protocol's commands and frames are still those of the Hertz experiment: a force
+// pressing the tool down (-z), N. The tool's lateral command is zero; frames carry the z
+// components of the tool's velocity and contact force (docs/protocol.md).
+double pressing_force(const State& state) { return -state.force_command[2]; }
+
 void sleep_until_ns(int64_t t) {
   timespec ts{static_cast<time_t>(t / 1000000000), static_cast<long>(t % 1000000000)};
   while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
@@ -192,7 +197,7 @@ void Simulation::run() {
     notify();
     return;
   }
-  status_force_.store(state_->force_command, std::memory_order_relaxed);
+  status_force_.store(pressing_force(*state_), std::memory_order_relaxed);
   publish();  // the rest state, so a first frame exists
   phase_.store(Phase::ready, std::memory_order_release);
   notify();
@@ -270,13 +275,13 @@ bool Simulation::tick_once() {
   }
   for (const Command& c : drained_) {
     switch (c.type) {
-      case CommandType::set_force: state.force_command = c.value; break;
+      case CommandType::set_force: state.force_command = press_down(c.value); break;
       case CommandType::reset: {
         rest_->restore(state);
         checkpoint_->save(state);
         state.time = 0.0;
         state.tick = 0;
-        state.force_command = model.initial_force_command;
+        state.force_command = press_down(model.initial_force_command);
         ticks_since_recovery_ = -1;
         break;
       }
@@ -288,7 +293,7 @@ bool Simulation::tick_once() {
   const bool had_commands = !drained_.empty();
   drained_.clear();
   paused_flag_.store(paused_, std::memory_order_relaxed);
-  status_force_.store(state.force_command, std::memory_order_relaxed);
+  status_force_.store(pressing_force(state), std::memory_order_relaxed);
   if (paused_ && !config_.headless) {
     if (had_commands) publish();  // let subscribers see a reset while paused
     return false;
@@ -319,13 +324,13 @@ void Simulation::recover(const std::string& what) {
   const uint32_t count = blow_ups_.fetch_add(1, std::memory_order_relaxed) + 1;
   const bool again = ticks_since_recovery_ >= 0 && ticks_since_recovery_ <= 2 * config_.checkpoint_interval;
   std::string how;
-  const double command = state.force_command;
+  const double command = pressing_force(state);
   if (again) {
     rest_->restore(state);
     checkpoint_->save(state);
-    state.force_command = model.initial_force_command;
-    status_force_.store(state.force_command, std::memory_order_relaxed);
-    how = "restored the rest state and the scene's initial force (" + std::to_string(state.force_command) +
+    state.force_command = press_down(model.initial_force_command);
+    status_force_.store(pressing_force(state), std::memory_order_relaxed);
+    how = "restored the rest state and the scene's initial force (" + std::to_string(pressing_force(state)) +
           " N; the command was " + std::to_string(command) + " N)";
   } else {
     checkpoint_->restore(state);
@@ -350,10 +355,10 @@ void Simulation::publish() {
   s.indenter[0] = state.indenter_center[0];
   s.indenter[1] = state.indenter_center[1];
   s.indenter[2] = state.indenter_center[2];
-  s.indenter_velocity = state.indenter_velocity;
-  s.contact_force = state.indenter_contact_force;
+  s.indenter_velocity = state.indenter_velocity[2];
+  s.contact_force = state.indenter_contact_force[2];
   s.indentation = indentation(model, state);
-  s.force_command = state.force_command;
+  s.force_command = pressing_force(state);
   s.command_seq = applied_seq_;
   s.recoveries = blow_ups_.load(std::memory_order_relaxed);
   s.has_positions = config_.headless || want_positions_.load(std::memory_order_relaxed);
