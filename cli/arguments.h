@@ -12,6 +12,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -128,21 +129,19 @@ inline std::vector<double> number_list(const std::string& text, const std::strin
   return values;
 }
 
-// A comma-separated list of positive numbers ("--forces 10,50.5"); T = double or int.
+// A comma-separated list of positive numbers ("--forces 10,50.5"); T = double or an
+// integer type: each item is a number_list item that must also be > 0 (and whole).
 template <class T = double>
 std::vector<T> positive_list(const std::string& text, const std::string& option) {
   std::vector<T> values;
   std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    size_t used = 0;
+  for (std::string item; std::getline(ss, item, ',');) {
     double v = NAN;
     try {
-      v = std::stod(item, &used);
-    } catch (const std::logic_error&) {
-      used = 0;
+      v = number(item, option);
+    } catch (const std::invalid_argument&) {
     }
-    if (used != item.size() || !std::isfinite(v) || v <= 0 || (std::is_integral_v<T> && v != std::floor(v)))
+    if (!(v > 0) || (std::is_integral_v<T> && v != std::floor(v)))
       throw std::invalid_argument(option + ": '" + item + "' is not a positive " +
                                   (std::is_integral_v<T> ? "integer" : "number"));
     values.push_back(static_cast<T>(v));

@@ -1,5 +1,7 @@
 #include "core/contact.h"
 
+#include "core/integrators.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -160,7 +162,7 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   // W_ab = dt^2 [ n_a . (response of particle a to a unit force n_b on b) + n_a . P n_b / M ],
   // P = diag(tool_axes): the axes the tool moves along (a guided axis has infinite mass).
   const double dt2 = dt * dt;
-  const double inv_sphere_mass = 1.0 / opt.indenter_mass;
+  const double inv_sphere_mass = 1.0 / tool_effective_mass(opt);  // with a coupling: implicit in it
   const Vec3 axes = tool_axes(opt);
   work.delassus.resize(static_cast<size_t>(m) * m);
   double* W = work.delassus.data();

@@ -96,7 +96,8 @@ StepStatus check_health(const Model& model, const Options& opt, State& state, St
 
   // Energy: work of the command (F . travel of the tool) and of gravity since the last check.
   const Vec3& c = state.indenter_center;
-  h.energy_input += state.force_command.dot(c - h.indenter_position) + (e.gravity_potential - h.gravity_potential);
+  h.energy_input += (state.force_command + state.out.coupling_force).dot(c - h.indenter_position) +
+                    (e.gravity_potential - h.gravity_potential);
   h.energy_budget = std::max(h.energy_budget, h.energy_input);
   h.indenter_position = c;
   h.gravity_potential = e.gravity_potential;

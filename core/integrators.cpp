@@ -80,6 +80,32 @@ Vec3 indenter_free_acceleration(const Options& opt, const State& state) {
   return a.cwiseProduct(tool_axes(opt));  // a guided axis takes no acceleration
 }
 
+double tool_effective_mass(const Options& opt) {
+  const double dt = opt.integrator.dt;
+  const CouplingOptions& c = opt.coupling;
+  return c.stiffness > 0.0 ? opt.indenter_mass + dt * c.damping + dt * dt * c.stiffness : opt.indenter_mass;
+}
+
+void tool_free_motion(const Model& model, const Options& opt, State& state) {
+  const double dt = opt.integrator.dt;
+  const CouplingOptions& c = opt.coupling;
+  const Vec3 axes = tool_axes(opt);
+  Vec3& x = state.indenter_center;
+  Vec3& v = state.indenter_velocity;
+  if (c.stiffness > 0.0) {
+    // (M + dt b + dt^2 k) v' = M v + dt [F + M g + k (T - x)],  x' = x + dt v'   (2.6)
+    const Vec3 load = state.indenter_contact_force + state.force_command + opt.indenter_mass * opt.gravity +
+                      c.stiffness * (state.tool_target - x);
+    v = ((opt.indenter_mass * v + dt * load) / tool_effective_mass(opt)).cwiseProduct(axes);
+  } else {
+    v += dt * indenter_free_acceleration(opt, state);
+  }
+  x += dt * v;
+  keep_tool_in_workspace(model, state);
+  state.out.coupling_force =
+      c.stiffness > 0.0 ? Vec3(c.stiffness * (state.tool_target - x) - c.damping * v) : Vec3::Zero();
+}
+
 void keep_tool_in_workspace(const Model& model, State& state) {
   for (int a = 0; a < 3; ++a) {
     double& c = state.indenter_center[a];
@@ -96,8 +122,11 @@ void keep_tool_in_workspace(const Model& model, State& state) {
 
 namespace {
 
-// The indenter under a constant force over the step, integrated exactly.
+// RK4's tool: under a constant force over the step, integrated exactly; with the
+// coupling on, the implicit step of tool_free_motion.
 void indenter_free_motion(const Model& model, const Options& opt, State& state, double dt) {
+  if (opt.coupling.stiffness > 0.0) return tool_free_motion(model, opt, state);
+  state.out.coupling_force.setZero();
   const Vec3 a = indenter_free_acceleration(opt, state);
   state.indenter_center += dt * state.indenter_velocity + 0.5 * dt * dt * a;
   state.indenter_velocity += dt * a;
@@ -251,9 +280,7 @@ void free_motion_symplectic_euler(const Model& model, const Options& opt, State&
   const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt, &sums};
   for_each_acceleration(model, opt, w.force.data(), state.velocity.data(), update);
   sums.write(state.out);
-  state.indenter_velocity += dt * indenter_free_acceleration(opt, state);
-  state.indenter_center += dt * state.indenter_velocity;
-  keep_tool_in_workspace(model, state);
+  tool_free_motion(model, opt, state);
 }
 
 namespace {
@@ -386,9 +413,7 @@ void free_motion_implicit_euler(const Model& model, const Options& opt, State& s
   state.out.cg_iterations = op.conjugate_gradient(w.rhs, w.dv);
   state.velocity += w.dv;
   state.position += dt * state.velocity;
-  state.indenter_velocity += dt * indenter_free_acceleration(opt, state);
-  state.indenter_center += dt * state.indenter_velocity;
-  keep_tool_in_workspace(model, state);
+  tool_free_motion(model, opt, state);
 }
 
 }  // namespace palpate

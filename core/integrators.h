@@ -25,6 +25,15 @@ void particle_accelerations(const Model& model, const Options& opt, const State&
 // tool has (tool_axes), 0 on the ones its guide holds.
 Vec3 indenter_free_acceleration(const Options& opt, const State& state);
 
+// The tool's mass as the contact sees it over one step: M, or with the virtual coupling
+// on, M + dt b + dt^2 k (the coupling is implicit in the tool's step), kg.
+double tool_effective_mass(const Options& opt);
+
+// The tool's free motion of symplectic and implicit Euler: v += dt a, x += dt v; with
+// the coupling on, implicit in it (docs/physics.md §2, "The indenter (the tool)", (2.6)). Writes
+// state.out.coupling_force; ends with keep_tool_in_workspace.
+void tool_free_motion(const Model& model, const Options& opt, State& state);
+
 // Puts a tool centre outside Model's tool workspace back on its boundary and removes
 // the outward component of its velocity (the free motion's last stage).
 void keep_tool_in_workspace(const Model& model, State& state);

@@ -12,6 +12,15 @@
 
 namespace palpate {
 
+// Position control of the tool (a haptic device's position in, a force out): a virtual
+// coupling, the spring-damper between the device position State::tool_target and the
+// tool's centre, integrated implicitly with the tool (so any stiffness is stable).
+// stiffness 0: off, the tool answers State::force_command alone.
+struct CouplingOptions {
+  double stiffness = 0.0;  // k, N/m
+  double damping = 0.0;    // b, N s/m
+};
+
 struct Options {
   IntegratorSpec integrator;   // scene "integrator": type, dt (s), damping (1/s), CG settings
   ContactSpec contact;         // scene "contact": tolerance (m), pivots
@@ -22,6 +31,7 @@ struct Options {
   // haptic coupling tunes it) and no precomputed quantity depends on it.
   double indenter_mass = 1.0;
   ToolGuide tool_guide = ToolGuide::vertical;  // scene indenter.guide: which translations the tool has
+  CouplingOptions coupling;  // off unless a caller sets it (position commands)
 };
 
 // The translations the tool has, as the diagonal of a projection: 1 on a free axis, 0 on

@@ -10,6 +10,7 @@ State make_state(const Model& model, const Options& opt) {
   s.position = model.rest_position;
   s.velocity = Points::Zero(3, n);
   s.indenter_center = model.indenter_start;
+  s.tool_target = model.indenter_start;
   s.force_command = press_down(model.initial_force_command);
   s.contact_index.reserve(n);
   s.contact_normal_force.reserve(n);

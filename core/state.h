@@ -84,6 +84,9 @@ struct CarriedState {
   // N, the external force on the tool in world coordinates: the real-time input. Pressing
   // a top face with F newtons is (0, 0, -F) (press_down()).
   Vec3 force_command{0, 0, 0};
+  // m, the device position the virtual coupling pulls the tool toward (Options::coupling;
+  // unused when the coupling is off).
+  Vec3 tool_target{0, 0, 0};
 
   // The contact set of the last step (contact stage). The free motion of the next step
   // carries these forces as external forces (integrators.h).
@@ -104,6 +107,9 @@ struct CarriedState {
 struct StepOutputs {
   // Free motion (integrators.h).
   int cg_iterations = 0;  // implicit Euler: CG iterations of the free-motion solve
+  // N, the virtual coupling's force on the tool at the end of the free motion,
+  // k (target - c) - b v (0 when off); the device renders its negative.
+  Vec3 coupling_force{0, 0, 0};
   // 1/2 sum m v^2 of the body and the sum of all coordinates, taken by the explicit
   // integrators' update pass (before contact) for the health checks; valid flags it.
   double free_motion_kinetic = 0.0, free_motion_position_sum = 0.0;

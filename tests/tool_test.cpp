@@ -127,6 +127,76 @@ TEST(Tool, PulledAwayToolStopsAtTheWorkspaceAndIsHealthy) {
   EXPECT_FALSE(s.contact_index.empty());
 }
 
+// The virtual coupling is passive (docs/physics.md (2.6)): moving the device by dT does
+// the work k (T - c) . dT + 1/2 k |dT|^2 on the spring (what its energy gains with c
+// held), and the implicit step with T held can only lose energy. So the tool's energy
+// 1/2 M |v|^2 + 1/2 k |T - c|^2 never exceeds the device's work, to round-off, even at a
+// stiffness whose explicit step would be unstable (omega dt = 3.2).
+TEST(Tool, VirtualCouplingNeverPutsInMoreThanTheDeviceWork) {
+  const test::Setup setup = test::setup_from_json(free_body(
+      R"({"radius": 0.05, "mass": 0.01, "position": [0.4, 0.4, 3], "guide": "free",
+          "workspace_min": [-10, -10, -10], "workspace_max": [10, 10, 10]})"));
+  const Model& m = setup.model;
+  Options opt = setup.opt;
+  opt.coupling.stiffness = 1e5;  // N/m: 100 N/mm
+  opt.coupling.damping = 0.5;    // N s/m
+  State s = make_state(m, opt);
+  const Vec3 start = s.indenter_center;
+  double device_work = 0.0, most = 0.0;
+  auto tool_energy = [&] {
+    return 0.5 * opt.indenter_mass * s.indenter_velocity.squaredNorm() +
+           0.5 * opt.coupling.stiffness * (s.tool_target - s.indenter_center).squaredNorm();
+  };
+  for (int k = 0; k < 2000; ++k) {
+    // A device path with corners: a square of 5 cm side at 1 m/s, then a jump.
+    const double t = (k + 1) * opt.integrator.dt;
+    const double u = std::fmod(t, 0.2) / 0.05;
+    Vec3 target = start + (u < 1 ? Vec3(0.05 * u, 0, 0)
+                          : u < 2 ? Vec3(0.05, 0.05 * (u - 1), 0)
+                          : u < 3 ? Vec3(0.05 * (3 - u), 0.05, 0)
+                                  : Vec3(0, 0.05 * (4 - u), 0));
+    if (k == 1500) target += Vec3(0, 0, 0.02);
+    const Vec3 dT = target - s.tool_target;
+    device_work += opt.coupling.stiffness * (s.tool_target - s.indenter_center).dot(dT) +
+                   0.5 * opt.coupling.stiffness * dT.squaredNorm();
+    s.tool_target = target;
+    ASSERT_EQ(step(m, opt, s), StepStatus::ok);
+    most = std::max(most, tool_energy());
+    ASSERT_LE(tool_energy(), device_work + 1e-12 * std::max(1.0, device_work)) << "step " << k;
+  }
+  EXPECT_GT(most, 1e-4);  // the spring was loaded
+  // The coupling force reported is the spring-damper's on the tool.
+  const Vec3 expected = opt.coupling.stiffness * (s.tool_target - s.indenter_center) -
+                        opt.coupling.damping * s.indenter_velocity;
+  EXPECT_LT((s.out.coupling_force - expected).norm(), 1e-9 * std::max(1.0, expected.norm()));
+}
+
+// A slowly moving device pressing into a fixed-bottom block: at rest the coupled tool
+// lags its target by F/k, F the contact force (k (T - c) + F_c = 0), laterally too.
+TEST(Tool, CoupledToolFollowsASlowTargetWithinForceOverStiffness) {
+  const test::Setup setup = test::setup_from_json(R"({"body": {"distribution": {"per_edge": 10}},
+    "indenter": {"radius": 0.5, "mass": 0.5, "guide": "free"},
+    "integrator": {"type": "symplectic_euler", "dt": 0.002, "damping": 10}})");
+  const Model& m = setup.model;
+  Options opt = setup.opt;
+  opt.coupling.stiffness = 2000;  // N/m
+  opt.coupling.damping = 40;      // N s/m
+  State s = make_state(m, opt);
+  const Vec3 start = s.indenter_center;
+  // 0.1 m down and 0.05 m sideways over 2 s, then held for 3 s.
+  for (int k = 0; k < 2500; ++k) {
+    const double f = std::min(1.0, (k + 1) * opt.integrator.dt / 2.0);
+    s.tool_target = start + f * Vec3(0.05, 0.0, -0.1);
+    ASSERT_EQ(step(m, opt, s), StepStatus::ok) << "step " << k << ": " << describe(s.health.report);
+  }
+  const Vec3 lag = s.tool_target - s.indenter_center;
+  const Vec3 contact = s.indenter_contact_force;
+  EXPECT_GT(contact[2], 10.0);  // pressed in
+  EXPECT_LT((opt.coupling.stiffness * lag + contact).norm(), 1e-3 * contact.norm());
+  EXPECT_NEAR(lag.norm(), contact.norm() / opt.coupling.stiffness, 1e-3 * lag.norm());
+  EXPECT_NEAR(s.indenter_center[0], s.tool_target[0] + contact[0] / opt.coupling.stiffness, 1e-4);
+}
+
 TEST(Tool, WorkspaceAndGuideFieldsAreValidated) {
   EXPECT_THROW(test::scene_from_json(R"({"indenter": {"guide": "sideways"}})"), SceneError);
   EXPECT_THROW(test::scene_from_json(R"({"indenter": {"workspace_min": [0, 0, 0], "workspace_max": [1, 0, 1]}})"),
