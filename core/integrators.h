@@ -43,7 +43,7 @@ void free_motion_rk4(const Model& model, const Options& opt, State& state);
 // Symplectic (semi-implicit) Euler: v += dt a(x, v); x += dt v.
 void free_motion_symplectic_euler(const Model& model, const Options& opt, State& state);
 // The step operator of linearly implicit Euler, A = (1 + dt c) M + dt^2 K over the
-// free particles, K the tangent stiffness cached in state.work by mls_linearize.
+// free particles, K the tangent stiffness cached in state.work by linearize_elastic (solid.h).
 // It is also the coupled response of the contact solve of that step.
 class ImplicitEulerOperator final : public LinearResponse {
  public:
