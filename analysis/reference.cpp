@@ -74,6 +74,8 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
   ref.forces = forces;
   ref.key = reference_key(scene);
   const double height = scene.box.max[2] - scene.box.min[2];
+  const double base_first_spacing =
+      options.base_first_spacing > 0 ? options.base_first_spacing : 0.05 * scene.indenter.radius;
   for (int per_edge : options.levels) {
     const auto start = std::chrono::steady_clock::now();
     Scene s = scene;
@@ -84,7 +86,7 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
     s.distribution.spacing = 0.0;
     s.distribution.focus_given = false;
     s.distribution.first_spacing =
-        family_first_spacing(height, options.base_per_edge, options.base_first_spacing, per_edge);
+        family_first_spacing(height, options.base_per_edge, base_first_spacing, per_edge);
     s.material.law = MaterialLaw::stvk;       // the hex FEM has its own (linear) law
     s.integrator.allow_unstable_dt = true;    // a static solve: no time step to be stable
     const Model model = build_model(s);

@@ -15,11 +15,19 @@
 #     --focus X Y Z     the focus, m (default the centre of the top face, the indenter's site)
 #     --focus-top       grade from the whole top face instead: r is the depth below it
 #                       (a palpation block, fine wherever the tool may touch it)
-#     --top-size H2     with a focus point: also at most H2 + (G - 1) x depth below the top
-#                       face, so the whole top face is at most H2 (the point stays finer)
+#     --top-size H2     with a focus point or a --patch: also at most H2 + (G - 1) x depth
+#                       below the top face, so the whole top face is at most H2 (the focus
+#                       stays finer)
+#     --patch A         with --focus-top: only the square |x - fx|, |y - fy| <= A of the top
+#                       face (fx, fy: the centre of the top face) is the focus; r is the
+#                       distance to it (the palpable part of the face, coarser toward walls)
 #     --seed N          gmsh's Mesh.RandomSeed (default 1); the mesh is deterministic
 #                       for a given gmsh version, seed and options
 #     --format F        msh41 (default) or msh22
+#
+# scenes/meshes/palpation_block.msh (the hand-scale block) is
+#   scripts/make_mesh.sh --box -0.05 -0.05 -0.05 0.05 0.05 0 --focus-size 0.001 --growth 1.2 \
+#     --top-size 0.0025 --far-size 0.015 --out scenes/meshes/palpation_block.msh
 #
 # gmsh is not needed by the build or the tests. If it is missing the script installs
 # Debian's package when run as root, else says how.
@@ -33,6 +41,7 @@ box=(-1 -1 -2 1 1 0)
 focus=()
 focus_top=0
 top_size=
+patch=
 seed=1
 format=msh41
 
@@ -53,9 +62,10 @@ while [ $# -gt 0 ]; do
              focus=("${@:2:3}"); shift 4 ;;
     --focus-top) focus_top=1; shift ;;
     --top-size) number "$1" "${2:-}"; top_size=$2; shift 2 ;;
+    --patch) number "$1" "${2:-}"; patch=$2; shift 2 ;;
     --seed) [[ "${2:-}" =~ ^[0-9]+$ ]] || die "--seed: expected a non-negative integer"; seed=$2; shift 2 ;;
     --format) case "${2:-}" in msh41|msh22) format=$2 ;; *) die "--format: msh41 or msh22, got '${2:-}'" ;; esac; shift 2 ;;
-    -h|--help) sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (--help)" ;;
   esac
 done
@@ -79,7 +89,11 @@ if ! command -v gmsh >/dev/null; then
   fi
 fi
 
-if [ $focus_top -eq 1 ]; then
+[ -z "$patch" ] || [ $focus_top -eq 1 ] || die "--patch goes with --focus-top"
+if [ $focus_top -eq 1 ] && [ -n "$patch" ]; then
+  distance="Sqrt(Max(Fabs(x - (${focus[0]})) - $patch, 0)^2 + Max(Fabs(y - (${focus[1]})) - $patch, 0)^2 + ((${box[5]}) - z)^2)"
+  where="the top face within $patch m of (${focus[0]}, ${focus[1]})"
+elif [ $focus_top -eq 1 ]; then
   distance="((${box[5]}) - z)"
   where="the top face z = ${box[5]}"
 else
@@ -88,7 +102,7 @@ else
 fi
 size="Min($h1, $h0 + ($growth - 1) * $distance)"
 if [ -n "$top_size" ]; then
-  [ $focus_top -eq 0 ] || die "--top-size goes with a focus point, not --focus-top"
+  [ $focus_top -eq 0 ] || [ -n "$patch" ] || die "--top-size goes with a focus point or a --patch"
   size="Min($size, $top_size + ($growth - 1) * ((${box[5]}) - z))"
   where="$where, at most $top_size m on the top face"
 fi

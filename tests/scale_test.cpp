@@ -10,9 +10,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 #include <vector>
 
+#include <filesystem>
+#include <optional>
+
+#include "analysis/reference.h"
+#include "analysis/rest.h"
 #include "core/health.h"
 #include "core/indentation.h"
 #include "core/model.h"
@@ -28,7 +34,11 @@ namespace {
 // scale multiplied by s: box, spacing, radius and workspace x s, tool mass x s^3, dt x s,
 // damping / s. E, nu and rho are the same at every scale.
 std::string hand_block(double s) {
-  const auto n = [](double v) { return std::to_string(v); };
+  const auto n = [](double v) {  // every digit: the two scales must differ by s alone
+    char text[32];
+    std::snprintf(text, sizeof text, "%.17g", v);
+    return std::string(text);
+  };
   return R"({"body": {"box": {"min": [)" + n(-0.05 * s) + "," + n(-0.05 * s) + "," + n(-0.05 * s) + R"(],
                               "max": [)" + n(0.05 * s) + "," + n(0.05 * s) + R"(, 0]},
                       "distribution": {"type": "grid", "spacing": )" + n(0.005 * s) + R"(}},
@@ -58,10 +68,10 @@ struct Palpation {
   double max_speed_in_flight = 0;  // the free tool's largest speed / its speed limit
 };
 
-// Press with 0.05 N, then 3 N; lift off (3 N upward: the 5 g tool flies to the workspace
+// Press with 0.05 N, then `firm` N; lift off (3 N upward: the 5 g tool flies to the workspace
 // top and stays there); move over another site and press it through the virtual coupling
 // (a device position 3 mm below the surface at (2, 1) cm).
-Palpation palpate(double s) {
+Palpation palpate(double s, double firm) {
   const test::Setup setup = test::setup_from_json(hand_block(s));
   const Model& model = setup.model;
   Options opt = setup.opt;
@@ -85,7 +95,7 @@ Palpation palpate(double s) {
   };
   state.force_command = press_down(0.05 * s * s);
   advance(300);
-  state.force_command = press_down(3.0 * s * s);
+  state.force_command = press_down(firm * s * s);
   advance(300);
   state.force_command = press_down(-3.0 * s * s);
   advance(200, true);
@@ -100,7 +110,7 @@ Palpation palpate(double s) {
 }
 
 TEST(HandScale, PressLiftOffAndPressElsewhereWithoutAFault) {
-  const Palpation run = palpate(1.0);
+  const Palpation run = palpate(1.0, 3.0);
   EXPECT_TRUE(run.finite);
   EXPECT_TRUE(run.faults.empty()) << run.faults.size() << " faults, the first " << run.first_fault;
   ASSERT_EQ(run.phases.size(), 4u);
@@ -113,12 +123,11 @@ TEST(HandScale, PressLiftOffAndPressElsewhereWithoutAFault) {
   EXPECT_GT(run.phases[3].contact.z(), 0.0);
 }
 
-// DISABLED: fails. The scenario scaled by 100 (lengths, times x 100, forces x 1e4, masses x 1e6)
-// ends the first 300 steps with d / R 5 % apart (0.514 vs 0.488 x R0) although no limit
-// trips at either scale: some quantity in the step (outside the health checks and the
-// scene defaults, which scale) is not scale-invariant. To be found before this is enabled.
-TEST(HandScale, DISABLED_ScaledByAHundredGivesTheSameDimensionlessAnswers) {
-  const Palpation small = palpate(1.0), large = palpate(100.0);
+TEST(HandScale, ScaledByAHundredGivesTheSameDimensionlessAnswers) {
+  // 0.5 N, not 3 N: under 3 N (d ~ R/2 on this coarse lattice) the free tool's lateral
+  // balance is unstable, and round-off (1e-16 apart at the two scales) grows by about 1.2 per
+  // 10 ms until the two runs part by per cents: chaos, not a scale dependence.
+  const Palpation small = palpate(1.0, 0.5), large = palpate(100.0, 0.5);
   EXPECT_EQ(small.faults.size(), large.faults.size());
   EXPECT_EQ(small.at_workspace_top, large.at_workspace_top);
   ASSERT_EQ(small.phases.size(), large.phases.size());
@@ -129,6 +138,29 @@ TEST(HandScale, DISABLED_ScaledByAHundredGivesTheSameDimensionlessAnswers) {
     EXPECT_NEAR(b.depth, a.depth, 1e-6 * std::max(a.depth, 1e-4));
     EXPECT_NEAR((b.contact - a.contact).norm(), 0.0, 1e-6 * std::max(a.contact.norm(), 1e-3));
     EXPECT_NEAR(b.speed, a.speed, 1e-6 * std::max(a.speed, 1e-3));
+  }
+}
+
+// The shipped palpation block (scenes/palpation_block.json: a 10 x 10 x 5 cm block, E = 20 kPa,
+// R = 1 cm, a 5121-node tetrahedralisation fine at the centre of the top face, symplectic
+// Euler at 1 ms) against its finite-block reference stored with the scenes, on the vertical
+// guide of the Hertz experiment (a free frictionless tool under a vertical force has no
+// lateral stiffness and wanders off the site): within 2 % at the ends and the middle of
+// the sweep (d/R = 0.07 ... 0.2).
+TEST(HandScale, PalpationBlockIsWithinTwoPercentOfItsFiniteBlockReference) {
+  const std::filesystem::path dir = std::string(PALPATE_SOURCE_DIR) + "/scenes";
+  const Scene scene = load_scene(dir / "palpation_block.json", {{"indenter.guide", "vertical"}});
+  const std::optional<Reference> reference = find_reference(scene, dir / "references");
+  ASSERT_TRUE(reference.has_value()) << "no stored reference for " << reference_key(scene);
+  const Model model = build_model(scene);
+  const Options opt = options_of(scene);
+  State state = make_state(model, opt);
+  for (double force : {scene.verify.forces.front(), scene.verify.forces[2], scene.verify.forces.back()}) {
+    const PressResult r = press_to_rest(model, opt, scene.verify.rest, state, force);
+    ASSERT_TRUE(r.at_rest) << "F = " << force;
+    ASSERT_EQ(r.status, StepStatus::ok) << "F = " << force;
+    const double d_ref = reference_indentation(*reference, force);
+    EXPECT_NEAR(r.indentation / d_ref - 1.0, 0.0, 0.02) << "F = " << force << ", d = " << r.indentation;
   }
 }
 
