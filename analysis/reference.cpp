@@ -63,7 +63,7 @@ void check_site(const Scene& scene, const std::string& field) {
   if (!site.allFinite() || site[0] < lo[0] || site[0] > hi[0] || site[1] < lo[1] || site[1] > hi[1])
     throw std::invalid_argument(field + ": the site " + where + " is off the top face [" + number_text(lo[0]) + ", " +
                                 number_text(hi[0]) + "] x [" + number_text(lo[1]) + ", " + number_text(hi[1]) + "] m");
-  // Distance to the nearest side wall: the sphere's footprint (radius R) must lie on the face.
+  // Distance to the nearest side wall: the sphere's footprint (radius R) must lie on the face (4.2).
   const double wall = std::min({site[0] - lo[0], hi[0] - site[0], site[1] - lo[1], hi[1] - site[1]});
   if (wall < R * (1.0 - 1e-12))
     throw std::invalid_argument(field + ": the site " + where + " is " + number_text(wall) +
@@ -100,12 +100,12 @@ double touch_height_at(const Model& model, double x, double y) {
     const double r2 = (X(0, i) - x) * (X(0, i) - x) + (X(1, i) - y) * (X(1, i) - y);
     if (r2 < R * R) surface = std::max(surface, X(2, i));
   }
-  return surface + R;  // (2.5); -inf when nothing lies under the sphere
+  return surface + R;  // (4.1); -inf when nothing lies under the sphere
 }
 
 double indentation_at_tool(const Model& model, const State& state) {
   const Vec3& c = state.indenter_center;
-  return touch_height_at(model, c[0], c[1]) - c[2];  // (2.5)
+  return touch_height_at(model, c[0], c[1]) - c[2];  // (4.1), (2.5) at the tool's (x, y)
 }
 
 std::string reference_key(const Scene& scene) {

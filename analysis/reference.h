@@ -40,7 +40,7 @@ namespace palpate {
 Eigen::Vector2d indenter_site(const Scene& scene);
 
 // Refuses (std::invalid_argument, "FIELD: ...") a site off the top face, or closer to a
-// side wall than the indenter radius R (the footprint within which the touch height is
+// side wall than the indenter radius R, (4.2) (the footprint within which the touch height is
 // taken, docs/physics.md (2.5), must lie on the face). `field` names where the site came
 // from (--site, or /indenter/position).
 void check_site(const Scene& scene, const std::string& field);
@@ -55,7 +55,7 @@ void place_indenter_at_site(Scene& scene, double x, double y, const std::string&
 // of the points X (3 x n); -inf when none lies within R horizontally.
 double first_contact_height(const Points& X, double R, double x, double y);
 
-// The touch height z_touch of (2.5) over (x, y): R + the height of the highest particle
+// The touch height z_touch of (2.5) over (x, y), (4.1): R + the height of the highest particle
 // of the reference configuration within horizontal distance R. Computed from the body,
 // so a face that is not flat or a cloud without a node under the site is measured as is.
 double touch_height_at(const Model& model, double x, double y);

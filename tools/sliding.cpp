@@ -55,7 +55,7 @@ SlideResult slide(const Model& model, const Options& opt, const RestSpec& rest, 
          prev_lag = state.tool_target[0] - prev_x;
   Checkpoint last_good(state);
   for (long k = 0; k < max_steps; ++k) {
-    state.tool_target = Vec3(x0 + spec.speed * (state.time - t0 + dt), y_m, state.indenter_center[2]);
+    state.tool_target = Vec3(x0 + spec.speed * (state.time - t0 + dt), y_m, state.indenter_center[2]);  // (4.3)
     const StepStatus status = step(model, sliding, state);
     ++out.steps;
     if (is_fault(status)) {
@@ -88,7 +88,7 @@ SlideResult slide(const Model& model, const Options& opt, const RestSpec& rest, 
   if (samples > 0) {
     out.mean_fx = sum_fx / samples;
     out.mean_fz = sum_fz / samples;
-    out.ratio = std::abs(out.mean_fx) / std::abs(out.mean_fz);                   // (4.2)
+    out.ratio = std::abs(out.mean_fx) / std::abs(out.mean_fz);                   // (4.4)
     out.rms_ratio = std::sqrt(sum_fx2 / samples) / std::abs(out.mean_fz);
   }
   if (out.status == "ok" && !(state.indenter_center[0] > x_hi)) out.status = "did not cross the window";

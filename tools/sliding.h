@@ -7,7 +7,7 @@
 // there. palpate-slide (tools/slide.cpp) prints the table; tests/sliding_test.cpp checks
 // a coarse version.
 //
-// The drag: before every step the target is put at T = (x_0 + v t, y_m, c_z): it moves
+// The drag (4.3): before every step the target is put at T = (x_0 + v t, y_m, c_z): it moves
 // at the speed v along x, holds the path's y, and its z follows the tool, so the spring
 // pulls only sideways and the normal load is the command (0, 0, -F) alone (the coupling's
 // damper, -b v_c, acts on the tool's velocity on every axis; at steady sliding its z part
@@ -39,7 +39,7 @@ struct SlideResult {
   double speed = 0;            // m/s
   double mean_fx = NAN;        // N, mean of F_c,x over the window (State::indenter_contact_force)
   double mean_fz = NAN;        // N, mean of F_c,z over the window
-  double ratio = NAN;          // |mean F_x| / |mean F_z|  (4.2)
+  double ratio = NAN;          // |mean F_x| / |mean F_z|  (4.4)
   double rms_ratio = NAN;      // rms(F_x) / |mean F_z| over the window: the corrugation of a discrete surface
   double depth_middle = NAN;   // m, d under the tool as it crosses x_m (interpolated between steps)
   double lag = NAN;            // m, T_x - c_x as the tool crosses x_m
