@@ -42,7 +42,8 @@ Eigen::Vector2d indenter_site(const Scene& scene);
 // Refuses (std::invalid_argument, "FIELD: ...") a site off the top face, or closer to a
 // side wall than the indenter radius R, (4.2) (the footprint within which the touch height is
 // taken, docs/physics.md (2.5), must lie on the face). `field` names where the site came
-// from (--site, or /indenter/position).
+// from (--site, or /indenter/position). The centre of the top face is always accepted (a
+// sphere wider than the face presses it, as the R = 5 m strain study does).
 void check_site(const Scene& scene, const std::string& field);
 
 // Places the indenter over (x, y), at rest just touching the undeformed body (the

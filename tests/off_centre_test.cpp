@@ -40,6 +40,10 @@ TEST(OffCentre, ASiteOffTheFaceOrCloserThanRToAWallIsRefused) {
   }
   Scene at_r = base;  // exactly R from the wall: the footprint just fits
   EXPECT_EQ(refusal([&] { place_indenter_at_site(at_r, 0.5, 0.0, "--site"); }), "");
+  // The centre is accepted whatever R (the R = 5 m strain study), an off-centre site not.
+  Scene wide = test::scene_from_json(R"({"indenter": {"radius": 5}})");
+  EXPECT_EQ(refusal([&] { check_site(wide, "/indenter/position"); }), "");
+  EXPECT_NE(refusal([&] { place_indenter_at_site(wide, 0.1, 0.0, "--site"); }), "");
   // The same check when the scene gives the site.
   const Scene placed = test::scene_from_json(R"({"indenter": {"position": [0.8, 0, 0.6]}})");
   EXPECT_NE(refusal([&] { check_site(placed, "/indenter/position"); }).find("/indenter/position"), std::string::npos);
