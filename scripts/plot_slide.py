@@ -49,8 +49,10 @@ def main(folder):
                          f'| {r["steps"]} | {r["wall_seconds"]:.1f} |')
     vmin = min(r["speed"] for _, d in runs for r in d["rows"])
     vmax = max(r["speed"] for _, d in runs for r in d["rows"])
-    ref = runs[0][1]["rows"]
-    anchor = next((r for r in reversed(ref) if r["ratio"] is not None), None)
+    # The slope-1 guide through the smallest ratio at the slowest speed (a symmetric cloud,
+    # whose quasi-static floor (4.5) is zero, follows it).
+    slowest = [r for _, d in runs for r in d["rows"] if r["ratio"] is not None and r["speed"] == vmin]
+    anchor = min(slowest, key=lambda r: r["ratio"]) if slowest else None
     if anchor:
         ax_ratio.loglog([vmin, vmax], [anchor["ratio"] * vmin / anchor["speed"], anchor["ratio"] * vmax / anchor["speed"]],
                         "k--", lw=0.8, label="slope 1 (linear drag)")
@@ -60,7 +62,7 @@ def main(folder):
     ax_ratio.set_title(f"Frictionless drag at F = {force:g} N, window x in [-{runs[0][1]['half_window']:g}, "
                        f"{runs[0][1]['half_window']:g}] m")
     ax_ratio.grid(True, which="both", alpha=0.3)
-    ax_ratio.legend(fontsize=7)
+    ax_ratio.legend(fontsize=7, loc="upper left")
     ax_depth.axhline(0, color="k", lw=0.8)
     ax_depth.set_xlabel("target speed v [m/s]")
     ax_depth.set_ylabel("(d_middle - d_static) / d_static [%]")
