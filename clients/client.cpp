@@ -47,7 +47,10 @@ one row per force.
                        (default 50)
   --headless           a headless session, stepped to rest force by force
   --max-steps N        headless: most ticks per force, >= 1 (default 20000)
-  --csv FILE           write every frame received (real time) or every row (headless)
+  --csv FILE           write every frame received (real time) or every row (headless):
+                       the scalars above, then the tool's centre, the 3-D contact and
+                       render forces and the local contact model (stiffness K row-major,
+                       N/m; its valid radius, m; the tick K was computed at)
   --help               print this text and exit
 Exit status: 0 when done; 1 when the connection fails or the server refuses (its
 message, naming the field, is printed); 2 for a wrong argument.
@@ -96,7 +99,36 @@ Args parse_args(int argc, char** argv) {
 struct Row {
   double time = 0, command = 0, indentation = 0, contact = 0;
   int64_t tick = 0;
+  // The 3-D tool (Frame.indenterPosition, toolContactForce, renderForce) and the local
+  // contact model (Frame.contactModel: stiffness row-major, N/m; valid radius, m).
+  double tool[3] = {0, 0, 0}, contact_vector[3] = {0, 0, 0}, render[3] = {0, 0, 0};
+  double stiffness[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+  double valid_radius = 0;
+  int64_t stiffness_tick = -1;
 };
+
+// The frame's fields of a Row.
+Row row_of(palpate::wire::Frame::Reader f) {
+  Row r;
+  r.tick = f.getTick();
+  r.command = f.getForceCommand();
+  r.indentation = f.getIndentation();
+  r.contact = f.getIndenterContactForce();
+  auto put = [](double* out, palpate::wire::Vec3::Reader v) {
+    out[0] = v.getX();
+    out[1] = v.getY();
+    out[2] = v.getZ();
+  };
+  put(r.tool, f.getIndenterPosition());
+  put(r.contact_vector, f.getToolContactForce());
+  put(r.render, f.getRenderForce());
+  auto model = f.getContactModel();
+  auto k = model.getStiffness();
+  for (unsigned i = 0; i < 9 && i < k.size(); ++i) r.stiffness[i] = k[i];
+  r.valid_radius = model.getValidRadius();
+  r.stiffness_tick = model.getStiffnessTick();
+  return r;
+}
 
 struct Hertz {
   double radius = 0.5, e_star = 1.0;
@@ -128,13 +160,8 @@ class Sink final : public FrameSink::Server {
 
  protected:
   kj::Promise<void> frame(FrameContext context) override {
-    auto f = context.getParams().getFrame();
-    Row r;
+    Row r = row_of(context.getParams().getFrame());
     r.time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-    r.tick = f.getTick();
-    r.command = f.getForceCommand();
-    r.indentation = f.getIndentation();
-    r.contact = f.getIndenterContactForce();
     latest = r;
     have = true;
     if (rows.size() < 10000000) rows.push_back(r);
@@ -163,11 +190,20 @@ void write_csv(const std::string& path, const std::vector<Row>& rows, const Hert
     std::fprintf(stderr, "palpate-client: cannot write %s\n", path.c_str());
     return;
   }
-  out << "time_s,tick,force_command_n,indentation_m,contact_force_n,hertz_depth_m\n";
+  out << "time_s,tick,force_command_n,indentation_m,contact_force_n,hertz_depth_m,"
+         "tool_x_m,tool_y_m,tool_z_m,contact_fx_n,contact_fy_n,contact_fz_n,render_fx_n,render_fy_n,render_fz_n,"
+         "k_xx_n_per_m,k_xy_n_per_m,k_xz_n_per_m,k_yx_n_per_m,k_yy_n_per_m,k_yz_n_per_m,k_zx_n_per_m,k_zy_n_per_m,"
+         "k_zz_n_per_m,valid_radius_m,stiffness_tick\n";
   out.precision(9);
-  for (const Row& r : rows)
+  for (const Row& r : rows) {
     out << r.time << ',' << r.tick << ',' << r.command << ',' << r.indentation << ',' << r.contact << ','
-        << h.depth(r.contact) << '\n';
+        << h.depth(r.contact);
+    for (double v : r.tool) out << ',' << v;
+    for (double v : r.contact_vector) out << ',' << v;
+    for (double v : r.render) out << ',' << v;
+    for (double v : r.stiffness) out << ',' << v;
+    out << ',' << r.valid_radius << ',' << r.stiffness_tick << '\n';
+  }
 }
 
 int run_realtime(const Args& a, Session::Client session, const Hertz& h, kj::WaitScope& ws, kj::Timer& timer) {
@@ -250,11 +286,8 @@ int run_headless(const Args& a, Session::Client session, const Hertz& h, double 
       auto frame_response = step.send().wait(ws);
       auto frame = frame_response.getFrame();
       steps += kChunk;
-      r.tick = frame.getTick();
+      r = row_of(frame);
       r.time = frame.getSimTime();
-      r.command = frame.getForceCommand();
-      r.indentation = frame.getIndentation();
-      r.contact = frame.getIndenterContactForce();
       const bool balanced = std::abs(r.contact - f) <= 1e-3 * std::max(std::abs(f), 1e-9);
       const bool still = std::abs(r.indentation - previous_d) <= 1e-6 && std::abs(frame.getIndenterVelocity()) <= 1e-5;
       previous_d = r.indentation;

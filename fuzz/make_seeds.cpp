@@ -106,5 +106,27 @@ int main(int argc, char** argv) {
     p.initOptions().setRateHz(60);
     write("subscribe", fuzz::subscribe, m);
   }
+  {
+    capnp::MallocMessageBuilder m;
+    auto p = m.initRoot<wire::Session::SetPositionParams>().initPosition();
+    p.setX(0.1);
+    p.setY(-0.2);
+    p.setZ(0.3);
+    write("set_position", fuzz::set_position, m);
+  }
+  {
+    capnp::MallocMessageBuilder m;
+    auto f = m.initRoot<wire::Session::SetForceVectorParams>().initForce();
+    f.setX(1.0);
+    f.setZ(-10.0);
+    write("set_force_vector", fuzz::set_force_vector, m);
+  }
+  {
+    capnp::MallocMessageBuilder m;
+    auto c = m.initRoot<wire::Session::SetCouplingParams>().initCoupling();
+    c.setStiffness(500.0);
+    c.setDamping(2.0);
+    write("set_coupling", fuzz::set_coupling, m);
+  }
   return 0;
 }

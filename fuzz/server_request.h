@@ -13,7 +13,10 @@ enum Kind : uint8_t {
   set_force = 1,     // wire::Session::SetForceParams -> Session.setForce
   step = 2,          // wire::Session::StepParams -> Session.step
   subscribe = 3,     // wire::Session::SubscribeParams -> Session.subscribe
-  kind_count = 4,
+  set_position = 4,  // wire::Session::SetPositionParams -> Session.setPosition
+  set_force_vector = 5,  // wire::Session::SetForceVectorParams -> Session.setForceVector
+  set_coupling = 6,  // wire::Session::SetCouplingParams -> Session.setCoupling
+  kind_count = 7,
 };
 
 }  // namespace palpate::fuzz

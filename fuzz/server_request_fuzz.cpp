@@ -70,8 +70,16 @@ void run_session(Scene scene) {
     return;  // the session reports "failed" with e.what()
   }
   const double limit = server::force_limit(scene);
+  const CouplingOptions coupling{1e3, 10.0};  // setCoupling accepts any finite k, b >= 0
   for (int tick = 0; tick < kTicks; ++tick) {
-    if (tick == kTicks / 2) state.force_command = press_down(limit);   // a setForce the server accepts
+    if (tick == kTicks / 4) {  // a setPosition the server accepts (a corner of the workspace), stiffly coupled
+      state.tool_target = model.tool_workspace_min;
+      opt.coupling = coupling;
+    }
+    if (tick == kTicks / 2) {  // a setForce the server accepts
+      state.force_command = press_down(limit);
+      opt.coupling = {};
+    }
     if (is_fault(step(model, opt, state))) break;          // a blow-up: the server restores a checkpoint
   }
 }
@@ -104,6 +112,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       case fuzz::subscribe:
         server::check_subscriber_rate(message.getRoot<wire::Session::SubscribeParams>().getOptions().getRateHz());
         break;
+      case fuzz::set_position:  // the default workspace of the default scene (its box grown by 2 R)
+        server::check_position(server::from_wire(message.getRoot<wire::Session::SetPositionParams>().getPosition()),
+                               Vec3(-2.0, -2.0, -3.0), Vec3(2.0, 2.0, 1.0));
+        break;
+      case fuzz::set_force_vector:
+        server::check_force_vector(
+            server::from_wire(message.getRoot<wire::Session::SetForceVectorParams>().getForce()), default_force_limit());
+        break;
+      case fuzz::set_coupling: {
+        const auto c = message.getRoot<wire::Session::SetCouplingParams>().getCoupling();
+        server::check_coupling("setCoupling: coupling", c.getStiffness(), c.getDamping());
+        break;
+      }
     }
   } catch (const kj::Exception&) {
   }

@@ -1,22 +1,29 @@
 # palpate wire protocol: a meshless soft-tissue simulation pressed by a rigid
 # sphere, served in real time (fixed-rate loop) or headless (stepped on demand).
 #
-# Conventions: SI units (m, kg, s, N, Pa). The indenter moves along z only; a
-# positive force presses it down (-z). A "tick" is one simulation step of the
-# scene's dt. Errors (bad scene, refused command) come back as RPC exceptions
-# whose description names the field and the reason, e.g.
+# Conventions: SI units (m, kg, s, N, Pa), world frame (z up; the body's top face
+# is its largest z). The tool (the "indenter", a rigid sphere) has three
+# translational degrees of freedom; the scene's indenter.guide may hold it on a
+# vertical line. It is driven either by a force (setForce: a scalar pressing it
+# down, -z; setForceVector: any direction) or by a device position through a
+# virtual coupling (setPosition). A "tick" is one simulation step of the scene's
+# dt. Errors (bad scene, refused command) come back as RPC exceptions whose
+# description names the field and the reason, e.g.
 #   "<rpc scene>: /material/poisson_ratio: must be a number in (-1, 0.5), got 0.7".
 #
 # Versioning: `protocolVersion` below, returned by PalpateServer.version(). It changes
-# whenever a change is not backwards compatible (renumbered or retyped fields);
-# additions with new ordinals keep it.
+# whenever a change is not backwards compatible (renumbered or retyped fields,
+# changed defaults, changed meaning); additions with new ordinals keep it.
 @0x84615ea29ce2782e;
 
 using Cxx = import "/capnp/c++.capnp";
 $Cxx.namespace("palpate::wire");
 using Json = import "/capnp/compat/json.capnp";
 
-const protocolVersion :UInt32 = 1;
+const protocolVersion :UInt32 = 2;
+# 2: the 3-D tool (position and force-vector commands, 3-D frames, the local
+# contact model, device limits, Session.close, Subscription.cancel) and scene
+# defaults that scale with the scene (changed defaults are not wire compatible).
 
 # ---------------------------------------------------------------------------
 # Scene: the same content as a JSON scene file (docs/scene-format.md), with the
@@ -188,6 +195,29 @@ struct OpenRequest {
   overrides @3 :List(Text);  # "dotted.key=value", applied before validation (like --set)
   headless @4 :Bool;         # true: not paced, advanced only by Session.step()
   rateHz @5 :Float64;        # real-time loop rate; 0 = the server's --rate. (0, 10000]
+  device @6 :DeviceLimits;   # the haptic device's limits; null = none (only the scene's force limit)
+  coupling @7 :Coupling;     # initial virtual coupling for setPosition; null or 0 = the session's default
+}
+
+# What a haptic device can render, given at session open. The virtual coupling's
+# stiffness and damping are clamped to them (a desktop device renders about
+# 0.4 to 1 N/mm at 1 kHz), and renderForce is saturated at maxForce. 0 = no limit.
+struct DeviceLimits {
+  maxStiffness @0 :Float64;  # N/m, >= 0
+  maxDamping @1 :Float64;    # N s/m, >= 0
+  maxForce @2 :Float64;      # N, >= 0
+}
+
+# The virtual coupling of position commands (docs/physics.md (2.6)): a spring and
+# damper from the device position to the tool's centre.
+struct Coupling {
+  stiffness @0 :Float64;     # k, N/m, >= 0
+  damping @1 :Float64;       # b, N s/m, >= 0
+}
+
+enum ControlMode {
+  force @0;      # the tool answers a force command (setForce, setForceVector)
+  position @1;   # the tool follows a device position through the virtual coupling (setPosition)
 }
 
 struct SessionInfo {
@@ -204,6 +234,12 @@ struct SessionInfo {
   poissonRatio @10 :Float64;
   buildSeconds @11 :Float64;   # time spent building the model
   sessionId @12 :UInt32;       # for PalpateServer.attach() from another connection
+  workspaceMin @13 :Vec3;      # m, the box the tool's centre stays in (setPosition targets must be inside)
+  workspaceMax @14 :Vec3;      # m
+  toolMass @15 :Float64;       # kg
+  guide @16 :ToolGuide;        # vertical: the tool moves along z only
+  device @17 :DeviceLimits;    # as given at open (0 = no limit)
+  coupling @18 :Coupling;      # the coupling in effect for setPosition (after clamping)
 }
 
 # ---------------------------------------------------------------------------
@@ -222,20 +258,43 @@ struct FrameFields {
   contacts @1 :Bool;    # Frame.contactNodes / contactForces
 }
 
+# The force on a point near `origin`, linearised: F(x) = force + stiffness (x - origin),
+# for |x - origin| <= validRadius (docs/protocol.md, "The local contact model").
+# A haptic servo loop faster than the tick rate renders from it between frames.
+struct LocalModel {
+  origin @0 :Vec3;              # m
+  force @1 :Vec3;               # N, at origin
+  stiffness @2 :List(Float64);  # N/m, 3 x 3 row-major: stiffness[3 i + j] = dF_i / dx_j
+  validRadius @3 :Float64;      # m; beyond it the contact set may change (0 = do not extrapolate)
+  stiffnessTick @4 :Int64;      # the tick whose state the stiffness was computed from (<= Frame.tick)
+}
+
 struct Frame {
   tick @0 :Int64;                   # ticks since the session (re)started; resets with reset()
   simTime @1 :Float64;              # s
   publishNs @2 :Int64;              # server CLOCK_MONOTONIC when the tick finished, ns
   indenterPosition @3 :Vec3;        # m
-  indenterVelocity @4 :Float64;     # m/s along z
-  indenterContactForce @5 :Float64; # N, z force of the body on the indenter (positive up)
-  indentation @6 :Float64;          # m, travel below first touch (positive when pressing)
-  forceCommand @7 :Float64;         # N, the command in effect during this tick
+  indenterVelocity @4 :Float64;     # m/s, z component of toolVelocity
+  indenterContactForce @5 :Float64; # N, z component of toolContactForce (positive up)
+  indentation @6 :Float64;          # m, travel below first touch under the tool's (x, y) (positive when pressing)
+  forceCommand @7 :Float64;         # N, the pressing force in effect during this tick: -z of forceVector
   commandSeq @8 :UInt64;            # sequence number of the last command applied (0 = none)
   recoveries @9 :UInt32;            # blow-ups recovered so far in this session
   positions @10 :List(Float32);     # 3 n: x y z per particle, m (when FrameFields.positions)
   contactNodes @11 :List(UInt32);   # particles in contact (when FrameFields.contacts)
   contactForces @12 :List(Float32); # 3 per contact: force on that particle, N
+  toolVelocity @13 :Vec3;           # m/s
+  toolContactForce @14 :Vec3;       # N, force of the body on the tool (sum of the contact forces, negated)
+  forceVector @15 :Vec3;            # N, the force command in effect (force mode; zero in position mode)
+  mode @16 :ControlMode;
+  target @17 :Vec3;                 # m, the device position of the last setPosition (position mode)
+  renderForce @18 :Vec3;            # N, the force for the device to render: position mode: the coupling's
+                                    # force on the device, saturated at DeviceLimits.maxForce; force mode:
+                                    # toolContactForce
+  contactModel @19 :LocalModel;     # toolContactForce as a function of the tool's centre (origin = its position)
+  renderModel @20 :LocalModel;      # renderForce as a function of the device position (position mode:
+                                    # origin = target, quasi-static tool; force mode: = contactModel)
+  forceSaturated @21 :Bool;         # renderForce was clipped to DeviceLimits.maxForce
 }
 
 interface FrameSink {
@@ -243,7 +302,8 @@ interface FrameSink {
   # One frame. The server sends the next only after this one's flow-control
   # go-ahead; frames in between are dropped (newest wins) and counted.
   done @1 (reason :Text);
-  # The session ended (closed, server shutting down). No more frames follow.
+  # No more frames follow: the subscription was cancelled, the session closed or
+  # the server is shutting down (reason says which).
 }
 
 struct SubscribeOptions {
@@ -251,8 +311,12 @@ struct SubscribeOptions {
   fields @1 :FrameFields;
 }
 
-interface Subscription {}
-# Handle of a subscription: releasing it unsubscribes.
+interface Subscription {
+  # Handle of a subscription: cancel() or releasing it unsubscribes.
+  cancel @0 () -> ();
+  # Ends the subscription now: no frame is sent after this call returns; the sink
+  # gets done("subscription cancelled"). Idempotent.
+}
 
 # ---------------------------------------------------------------------------
 # Statistics.
@@ -300,10 +364,12 @@ struct Status {
   state @0 :RunState;
   tick @1 :Int64;
   simTime @2 :Float64;
-  forceCommand @3 :Float64;
+  forceCommand @3 :Float64;    # N, pressing (-z of the force command)
   blowUps @4 :UInt32;
   lastBlowUp @5 :Text;         # what was detected and how it recovered; empty if none
   lastBlowUpTick @6 :Int64;    # -1 if none
+  mode @7 :ControlMode;
+  closed @8 :Bool;             # Session.close() was called
 }
 
 # ---------------------------------------------------------------------------
@@ -311,12 +377,12 @@ struct Status {
 
 interface Session {
   setForce @0 (newtons :Float64) -> (seq :UInt64, queuedAtTick :Int64);
-  # Commands the indenter force (N, pressing down when positive), applied at the
-  # start of the next tick. Refused, leaving the state untouched, when NaN,
-  # infinite or |F| > SessionInfo.forceLimit (100 x the scene's largest
-  # verification force, or 100 x the Hertz force at 0.1 m depth when the scene
-  # has no sweep). seq appears in Frame.commandSeq once applied; queuedAtTick is
-  # the newest published tick when the command was queued.
+  # Force mode with the force (0, 0, -newtons): N, pressing down when positive,
+  # applied at the start of the next tick. Refused, leaving the state untouched,
+  # when NaN, infinite or |F| > SessionInfo.forceLimit (100 x the scene's largest
+  # verification force, or 100 x the Hertz force at d = R / 5 when the scene has
+  # no sweep). seq appears in Frame.commandSeq once applied; queuedAtTick is the
+  # newest published tick when the command was queued.
 
   reset @1 () -> (seq :UInt64);
   # Back to the rest state of the scene (tick 0, the scene's initial force).
@@ -336,6 +402,25 @@ interface Session {
   stats @6 () -> (stats :Stats);
   status @7 () -> (status :Status);
   info @8 () -> (info :SessionInfo);
+
+  setForceVector @9 (force :Vec3) -> (seq :UInt64, queuedAtTick :Int64);
+  # Force mode with any force on the tool (N, world frame). Refused when a
+  # component is not finite or |force| > SessionInfo.forceLimit.
+
+  setPosition @10 (position :Vec3) -> (seq :UInt64, queuedAtTick :Int64);
+  # Position mode: the device is at `position` (m); the virtual coupling pulls the
+  # tool toward it and Frame.renderForce is the force to render. Refused when a
+  # component is not finite or the point is outside the tool workspace
+  # (SessionInfo.workspaceMin/Max).
+
+  setCoupling @11 (coupling :Coupling) -> (seq :UInt64, coupling :Coupling);
+  # The coupling's stiffness and damping, clamped to the device's limits; returns
+  # the values in effect. Refused when negative or not finite.
+
+  close @12 () -> ();
+  # Ends the session now: its loop stops, every subscriber gets done("session
+  # closed"), and every later call on it fails. Other references (attach) see it
+  # closed too. Idempotent.
 }
 
 interface PalpateServer {

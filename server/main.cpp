@@ -229,8 +229,12 @@ int main(int argc, char** argv) {
       const int sig = sigint.exclusiveJoin(kj::mv(sigterm)).wait(io.waitScope);
       spdlog::info("signal {}: shutting down {} session(s)", sig, ctx.sessions.size());
 
-      // Simulation threads first, while the loop still exists (docs/protocol.md, "Shutdown").
+      // Simulation threads first, while the loop still exists (docs/protocol.md, "Shutdown"),
+      // then every subscriber is told (FrameSink.done), for at most a second.
       ctx.stop_all();
+      ctx.close_all("server shutting down")
+          .exclusiveJoin(io.provider->getTimer().afterDelay(1 * kj::SECONDS))
+          .wait(io.waitScope);
       accepting = nullptr;
     }  // connections (and with them every session and subscription) go here
     listener = nullptr;

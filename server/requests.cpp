@@ -126,7 +126,7 @@ double force_limit(const Scene& scene) {
   double f = 0.0;
   for (double v : scene.verify.forces) f = std::max(f, std::abs(v));
   if (f == 0.0)
-    f = hertz::force(0.1, scene.indenter.radius,
+    f = hertz::force(0.2 * scene.indenter.radius, scene.indenter.radius,
                      hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio));
   return 100.0 * f;
 }
@@ -136,6 +136,37 @@ void check_force(double newtons, double limit) {
   if (std::abs(newtons) > limit)
     fail("setForce: newtons: |F| must be at most " + std::to_string(limit) + " N for this scene, got " +
          std::to_string(newtons));
+}
+
+namespace {
+std::string text(const Vec3& v) {
+  char b[96];
+  std::snprintf(b, sizeof b, "(%.6g, %.6g, %.6g)", v[0], v[1], v[2]);
+  return b;
+}
+}  // namespace
+
+void check_force_vector(const Vec3& force, double limit) {
+  if (!force.allFinite()) fail("setForceVector: force: every component must be a finite number, got " + text(force));
+  if (force.norm() > limit)
+    fail("setForceVector: force: |F| must be at most " + std::to_string(limit) + " N for this scene, got " +
+         std::to_string(force.norm()) + " N");
+}
+
+void check_position(const Vec3& position, const Vec3& workspace_min, const Vec3& workspace_max) {
+  if (!position.allFinite())
+    fail("setPosition: position: every component must be a finite number, got " + text(position));
+  for (int a = 0; a < 3; ++a)
+    if (position[a] < workspace_min[a] || position[a] > workspace_max[a])
+      fail("setPosition: position: " + text(position) + " m is outside the tool workspace " + text(workspace_min) +
+           " .. " + text(workspace_max) + " m (SessionInfo.workspaceMin/Max)");
+}
+
+void check_coupling(const char* where, double stiffness, double damping) {
+  if (!std::isfinite(stiffness) || stiffness < 0.0)
+    fail(std::string(where) + ".stiffness: must be a finite number >= 0 (N/m), got " + std::to_string(stiffness));
+  if (!std::isfinite(damping) || damping < 0.0)
+    fail(std::string(where) + ".damping: must be a finite number >= 0 (N s/m), got " + std::to_string(damping));
 }
 
 void check_step_count(uint32_t n) {
@@ -163,6 +194,22 @@ OpenPlan plan_session(wire::OpenRequest::Reader request, const ServerOptions& op
   if (!(rate == 0.0 || (rate > 0.0 && rate <= 10000.0)))
     fail("openSession: request.rateHz: must be in (0, 10000] (0 = the server's rate), got " + std::to_string(rate));
   plan.sim.rate_hz = rate == 0.0 ? options.rate_hz : rate;
+
+  if (request.hasDevice()) {
+    const auto d = request.getDevice();
+    const std::pair<const char*, double> limits[] = {
+        {"maxStiffness", d.getMaxStiffness()}, {"maxDamping", d.getMaxDamping()}, {"maxForce", d.getMaxForce()}};
+    for (const auto& [field, value] : limits)
+      if (!std::isfinite(value) || value < 0.0)
+        fail(std::string("openSession: request.device.") + field + ": must be a finite number >= 0 (0 = no limit), got " +
+             std::to_string(value));
+    plan.sim.device = {d.getMaxStiffness(), d.getMaxDamping(), d.getMaxForce()};
+  }
+  if (request.hasCoupling()) {
+    const auto c = request.getCoupling();
+    check_coupling("openSession: request.coupling", c.getStiffness(), c.getDamping());
+    plan.sim.coupling = {c.getStiffness(), c.getDamping()};
+  }
 
   try {
     for (auto o : request.getOverrides()) plan.overrides.push_back(split_override(o.cStr(), "<rpc overrides>"));

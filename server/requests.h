@@ -67,12 +67,19 @@ Scene resolve_scene(const OpenPlan& plan, const ServerOptions& options);
 // Both steps in one (tests, fuzzers, the server's start-up check of its default scene).
 Scene session_scene(wire::OpenRequest::Reader request, const ServerOptions& options);
 
-// The largest |F| setForce accepts: 100 x the largest verification force, or
-// 100 x the Hertz force at 0.1 m depth when the scene has no sweep.
+// The largest |F| setForce and setForceVector accept: 100 x the largest verification
+// force, or 100 x the Hertz force at d = R / 5 when the scene has no sweep.
 double force_limit(const Scene& scene);
 
 // Refuse a NaN, infinite or too large force (N).
 void check_force(double newtons, double limit);
+void check_force_vector(const Vec3& force, double limit);
+// Refuse a device position that is not finite or outside the tool workspace (m).
+void check_position(const Vec3& position, const Vec3& workspace_min, const Vec3& workspace_max);
+// Refuse a coupling with a negative or non-finite stiffness (N/m) or damping (N s/m).
+void check_coupling(const char* where, double stiffness, double damping);
+// A wire Vec3.
+inline Vec3 from_wire(wire::Vec3::Reader v) { return Vec3(v.getX(), v.getY(), v.getZ()); }
 // Refuse a step count outside [1, 1e6].
 void check_step_count(uint32_t n);
 // Refuse a subscriber rate outside [0, 1e5] Hz (0 = every tick).

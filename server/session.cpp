@@ -19,20 +19,42 @@ namespace palpate::server {
 
 namespace {
 
+void set_vec3(wire::Vec3::Builder b, const Vec3& v) {
+  b.setX(v[0]);
+  b.setY(v[1]);
+  b.setZ(v[2]);
+}
+
+void fill_local_model(wire::LocalModel::Builder b, const LocalModel& m) {
+  set_vec3(b.initOrigin(), m.origin);
+  set_vec3(b.initForce(), m.force);
+  auto k = b.initStiffness(9);
+  for (unsigned i = 0; i < 3; ++i)
+    for (unsigned j = 0; j < 3; ++j) k.set(3 * i + j, m.stiffness(i, j));
+  b.setValidRadius(m.valid_radius);
+  b.setStiffnessTick(m.stiffness_tick);
+}
+
 void fill_frame(wire::Frame::Builder f, const Snapshot& s, bool positions, bool contacts) {
   f.setTick(s.tick);
   f.setSimTime(s.sim_time);
   f.setPublishNs(s.publish_ns);
-  auto p = f.initIndenterPosition();
-  p.setX(s.indenter[0]);
-  p.setY(s.indenter[1]);
-  p.setZ(s.indenter[2]);
-  f.setIndenterVelocity(s.indenter_velocity);
-  f.setIndenterContactForce(s.contact_force);
+  set_vec3(f.initIndenterPosition(), s.tool_position);
+  f.setIndenterVelocity(s.tool_velocity[2]);
+  f.setIndenterContactForce(s.tool_contact_force[2]);
   f.setIndentation(s.indentation);
-  f.setForceCommand(s.force_command);
+  f.setForceCommand(-s.force_command[2]);
   f.setCommandSeq(s.command_seq);
   f.setRecoveries(s.recoveries);
+  set_vec3(f.initToolVelocity(), s.tool_velocity);
+  set_vec3(f.initToolContactForce(), s.tool_contact_force);
+  set_vec3(f.initForceVector(), s.force_command);
+  f.setMode(s.position_mode ? wire::ControlMode::POSITION : wire::ControlMode::FORCE);
+  set_vec3(f.initTarget(), s.target);
+  set_vec3(f.initRenderForce(), s.render_force);
+  f.setForceSaturated(s.force_saturated);
+  fill_local_model(f.initContactModel(), s.contact_model);
+  fill_local_model(f.initRenderModel(), s.render_model);
   if (positions && s.has_positions) {
     auto list = f.initPositions(static_cast<unsigned>(s.positions.size()));
     for (unsigned k = 0; k < s.positions.size(); ++k) list.set(k, s.positions[k]);
@@ -46,7 +68,7 @@ void fill_frame(wire::Frame::Builder f, const Snapshot& s, bool positions, bool 
 }
 
 capnp::MessageSize frame_size_hint(const Snapshot& s, bool positions, bool contacts) {
-  uint64_t words = 64;
+  uint64_t words = 160;
   if (positions && s.has_positions) words += s.positions.size() / 2 + 2;
   if (contacts && s.has_contacts) words += s.contact_nodes.size() + 4;
   return {words, 0};
@@ -122,12 +144,7 @@ class SessionImpl final : public wire::Session::Server {
 
   ~SessionImpl() noexcept(false) {
     ctx_.sessions.erase(id_);
-    for (auto& sub : subscribers_) {
-      auto req = sub.sink.doneRequest();
-      req.setReason("session closed");
-      ctx_.add_task(req.send().ignoreResult());
-    }
-    subscribers_.clear();
+    if (!closed_) ctx_.add_task(end_subscriptions("session closed"));
     wake_loop_ = nullptr;
     wake_ = nullptr;  // the eventfd is watched by one object at a time
     if (sim_->phase() == Phase::starting) {
@@ -155,6 +172,30 @@ class SessionImpl final : public wire::Session::Server {
   void stop() { sim_->stop(); }
   wire::Session::Client self() { return thisCap(); }
 
+  // Every subscriber gets done(reason) and is removed; resolves when each done() was
+  // delivered or failed (a vanished client).
+  kj::Promise<void> end_subscriptions(const char* reason) {
+    kj::Vector<kj::Promise<void>> sent;
+    for (auto& sub : subscribers_) sent.add(send_done(sub.sink, reason));
+    subscribers_.clear();  // cancels in-flight frames
+    if (phase_ == Phase::ready) update_wanted();
+    return kj::joinPromises(sent.releaseAsArray());
+  }
+
+  // Session.close() and the server's shutdown: the loop stops, subscribers are told.
+  kj::Promise<void> close_session(const char* reason) {
+    if (closed_) return kj::READY_NOW;
+    closed_ = true;
+    if (sim_->phase() != Phase::starting) sim_->stop();
+    return end_subscriptions(reason);
+  }
+
+  static kj::Promise<void> send_done(wire::FrameSink::Client& sink, const char* reason) {
+    auto req = sink.doneRequest();
+    req.setReason(reason);
+    return req.send().ignoreResult().catch_([](kj::Exception&&) {});
+  }
+
   void fill_info(wire::SessionInfo::Builder info) {
     KJ_ASSERT(phase_ == Phase::ready);
     const Model& m = sim_->model();
@@ -174,31 +215,90 @@ class SessionImpl final : public wire::Session::Server {
     info.setPoissonRatio(s.material.poisson_ratio);
     info.setBuildSeconds(sim_->build_seconds());
     info.setSessionId(id_);
+    set_vec3(info.initWorkspaceMin(), m.tool_workspace_min);
+    set_vec3(info.initWorkspaceMax(), m.tool_workspace_max);
+    info.setToolMass(sim_->initial_options().indenter_mass);
+    info.setGuide(sim_->initial_options().tool_guide == ToolGuide::free ? wire::ToolGuide::FREE
+                                                                       : wire::ToolGuide::VERTICAL);
+    const DeviceLimits& d = sim_->config().device;
+    auto device = info.initDevice();
+    device.setMaxStiffness(d.max_stiffness);
+    device.setMaxDamping(d.max_damping);
+    device.setMaxForce(d.max_force);
+    auto coupling = info.initCoupling();
+    coupling.setStiffness(coupling_.stiffness);
+    coupling.setDamping(coupling_.damping);
   }
 
   // --- Session methods -----------------------------------------------------
 
   kj::Promise<void> setForce(SetForceContext context) override {
+    check_open("setForce");
     const double f = context.getParams().getNewtons();
     check_force(f, force_limit_);
     auto results = context.getResults();
-    results.setSeq(check_queued("setForce", sim_->enqueue(CommandType::set_force, f)));
+    results.setSeq(check_queued("setForce", sim_->enqueue(CommandType::set_force, press_down(f))));
     results.setQueuedAtTick(sim_->newest_tick());
     return kj::READY_NOW;
   }
 
+  kj::Promise<void> setForceVector(SetForceVectorContext context) override {
+    check_open("setForceVector");
+    const Vec3 f = from_wire(context.getParams().getForce());
+    check_force_vector(f, force_limit_);
+    auto results = context.getResults();
+    results.setSeq(check_queued("setForceVector", sim_->enqueue(CommandType::set_force, f)));
+    results.setQueuedAtTick(sim_->newest_tick());
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> setPosition(SetPositionContext context) override {
+    check_open("setPosition");
+    const Vec3 x = from_wire(context.getParams().getPosition());
+    const Model& m = sim_->model();
+    check_position(x, m.tool_workspace_min, m.tool_workspace_max);
+    auto results = context.getResults();
+    results.setSeq(check_queued("setPosition", sim_->enqueue(CommandType::set_position, x)));
+    results.setQueuedAtTick(sim_->newest_tick());
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> setCoupling(SetCouplingContext context) override {
+    check_open("setCoupling");
+    const auto c = context.getParams().getCoupling();
+    check_coupling("setCoupling: coupling", c.getStiffness(), c.getDamping());
+    const CouplingOptions clamped = clamp_to_device({c.getStiffness(), c.getDamping()}, sim_->config().device);
+    auto results = context.getResults();
+    results.setSeq(check_queued(
+        "setCoupling", sim_->enqueue(CommandType::set_coupling, Vec3(clamped.stiffness, clamped.damping, 0.0))));
+    coupling_ = clamped;
+    auto applied = results.initCoupling();
+    applied.setStiffness(clamped.stiffness);
+    applied.setDamping(clamped.damping);
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> close(CloseContext) override {
+    if (closed_) return kj::READY_NOW;
+    spdlog::info("session {} closed by its client", id_);
+    return close_session("session closed");
+  }
+
   kj::Promise<void> reset(ResetContext context) override {
+    check_open("reset");
     context.getResults().setSeq(check_queued("reset", sim_->enqueue(CommandType::reset)));
     return kj::READY_NOW;
   }
 
   kj::Promise<void> pause(PauseContext context) override {
+    check_open("pause");
     if (sim_->config().headless) fail("pause: a headless session only advances in step()");
     context.getResults().setSeq(check_queued("pause", sim_->enqueue(CommandType::pause)));
     return kj::READY_NOW;
   }
 
   kj::Promise<void> resume(ResumeContext context) override {
+    check_open("resume");
     if (sim_->config().headless) fail("resume: a headless session only advances in step()");
     context.getResults().setSeq(check_queued("resume", sim_->enqueue(CommandType::resume)));
     return kj::READY_NOW;
@@ -207,6 +307,7 @@ class SessionImpl final : public wire::Session::Server {
   kj::Promise<void> subscribe(SubscribeContext context) override;
 
   kj::Promise<void> step(StepContext context) override {
+    check_open("step");
     if (!sim_->config().headless) fail("step: only headless sessions are stepped by the client");
     const uint32_t n = context.getParams().getN();
     check_step_count(n);
@@ -270,6 +371,8 @@ class SessionImpl final : public wire::Session::Server {
     s.setBlowUps(st.blow_ups);
     s.setLastBlowUp(st.last_blow_up);
     s.setLastBlowUpTick(st.last_blow_up_tick);
+    s.setMode(st.position_mode ? wire::ControlMode::POSITION : wire::ControlMode::FORCE);
+    s.setClosed(closed_);
     return kj::READY_NOW;
   }
 
@@ -278,14 +381,17 @@ class SessionImpl final : public wire::Session::Server {
     return kj::READY_NOW;
   }
 
-  void unsubscribe(uint32_t id) {
+  // The subscriber leaves (its handle released, or cancel() with `reason`: then its
+  // sink gets done(reason) after the frames already sent).
+  void unsubscribe(uint32_t id, const char* reason = nullptr) {
     for (auto it = subscribers_.begin(); it != subscribers_.end(); ++it)
       if (it->id == id) {
         spdlog::debug("session {}: subscriber {} left ({} sent, {} dropped)", id_, id, it->sent, it->dropped);
+        if (reason != nullptr) ctx_.add_task(send_done(it->sink, reason));
         subscribers_.erase(it);  // cancels its in-flight send
         break;
       }
-    update_wanted();
+    if (phase_ == Phase::ready) update_wanted();
   }
 
  private:
@@ -323,6 +429,11 @@ class SessionImpl final : public wire::Session::Server {
     return std::make_unique<Simulation>(config, std::move(prepare));
   }
 
+  // Every method of a closed session fails (close() itself is idempotent).
+  void check_open(const char* method) {
+    if (closed_) fail(std::string(method) + ": the session is closed (Session.close)");
+  }
+
   void check_phase() {
     if (phase_ != Phase::starting) return;
     phase_ = sim_->phase();
@@ -330,6 +441,7 @@ class SessionImpl final : public wire::Session::Server {
       error_ = sim_->status().error;
     } else if (phase_ == Phase::ready) {
       force_limit_ = force_limit(sim_->scene());
+      coupling_ = sim_->initial_coupling();
       spdlog::info("session {} opened ({}, {}, built in {:.2f} s)", id_, sim_->scene().name,
                    sim_->config().headless ? "headless" : "real-time", sim_->build_seconds());
     }
@@ -414,6 +526,8 @@ class SessionImpl final : public wire::Session::Server {
   Phase phase_ = Phase::starting;  // as last seen on the RPC thread
   std::string error_;              // phase_ == failed
   double force_limit_ = 0.0;       // N, once phase_ == ready
+  CouplingOptions coupling_;       // the coupling in effect (SessionInfo.coupling), once ready
+  bool closed_ = false;            // Session.close() or the server's shutdown
   kj::Vector<kj::Own<kj::PromiseFulfiller<void>>> ready_waiters_;
   kj::Own<kj::PromiseFulfiller<void>> job_;
   std::list<Subscriber> subscribers_;
@@ -427,6 +541,11 @@ class SubscriptionImpl final : public wire::Subscription::Server {  // RPC threa
       : session_cap_(kj::mv(session_cap)), session_(session), id_(id) {}
   ~SubscriptionImpl() noexcept(false) { session_.unsubscribe(id_); }
 
+  kj::Promise<void> cancel(CancelContext) override {
+    session_.unsubscribe(id_, "subscription cancelled");  // a second call finds nothing
+    return kj::READY_NOW;
+  }
+
  private:
   wire::Session::Client session_cap_;
   SessionImpl& session_;
@@ -434,6 +553,7 @@ class SubscriptionImpl final : public wire::Subscription::Server {  // RPC threa
 };
 
 kj::Promise<void> SessionImpl::subscribe(SubscribeContext context) {
+  check_open("subscribe");
   auto params = context.getParams();
   auto options = params.getOptions();
   const double rate = options.getRateHz();
@@ -507,6 +627,12 @@ kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
 void ServerContext::stop_all() {
   for (auto& [id, s] : sessions) s->stop();
   for (Closing* c : closing_) c->sim->stop();
+}
+
+kj::Promise<void> ServerContext::close_all(const char* reason) {
+  kj::Vector<kj::Promise<void>> closing;
+  for (auto& [id, s] : sessions) closing.add(s->close_session(reason));
+  return kj::joinPromises(closing.releaseAsArray());
 }
 
 }  // namespace palpate::server

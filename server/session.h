@@ -34,6 +34,9 @@ struct ServerContext {
   // Stops every simulation thread (before the event loop goes away). Waits for
   // starts in progress to reach the end of their stage.
   void stop_all();
+  // Closes every session (Session.close() semantics): resolves when each subscriber's
+  // done(reason) was delivered or failed.
+  kj::Promise<void> close_all(const char* reason);
   void add_task(kj::Promise<void> task) { tasks_.add(kj::mv(task)); }
 
   // A session whose last reference went while its thread was still starting

@@ -16,6 +16,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/health.h"
+#include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/step.h"
 
@@ -29,9 +30,8 @@ int64_t now_ns() {
 
 namespace {
 
-// The protocol's commands and frames are still those of the Hertz experiment: a force
-// pressing the tool down (-z), N. The tool's lateral command is zero; frames carry the z
-// components of the tool's velocity and contact force (docs/protocol.md).
+// The pressing force of the Hertz experiment's scalar fields (Frame.forceCommand,
+// Status.forceCommand): N, -z of the force command.
 double pressing_force(const State& state) { return -state.force_command[2]; }
 
 void sleep_until_ns(int64_t t) {
@@ -56,11 +56,29 @@ double divergence_bound(const Model& model) {
 }
 bool diverged(const Model& model, const State& state, double bound) {
   const double worst = (state.position - model.rest_position).cwiseAbs().maxCoeff();
-  const double indenter = std::abs(state.indenter_center[2] - model.indenter_start[2]);
+  const double indenter = (state.indenter_center - model.indenter_start).cwiseAbs().maxCoeff();
   return !(worst <= bound) || !(indenter <= bound);
 }
 
 }  // namespace
+
+CouplingOptions clamp_to_device(CouplingOptions c, const DeviceLimits& device) {
+  if (device.max_stiffness > 0.0) c.stiffness = std::min(c.stiffness, device.max_stiffness);
+  if (device.max_damping > 0.0) c.damping = std::min(c.damping, device.max_damping);
+  return c;
+}
+
+CouplingOptions default_coupling(const Model& model, const Options& opt, const DeviceLimits& device) {
+  const double mu = model.lame_mu, lambda = model.lame_lambda;
+  const double young = mu * (3.0 * lambda + 2.0 * mu) / (lambda + mu);
+  const double poisson = lambda / (2.0 * (lambda + mu));
+  const double R = model.indenter_radius;
+  CouplingOptions c;
+  c.stiffness = 2.0 * hertz::effective_modulus(young, poisson) * std::sqrt(R * (R / 5.0));
+  c = clamp_to_device(c, device);
+  c.damping = 2.0 * std::sqrt(c.stiffness * opt.indenter_mass);
+  return clamp_to_device(c, device);
+}
 
 // ---------------------------------------------------------------------------
 // Simulation
@@ -100,7 +118,7 @@ void Simulation::stop() {
   if (thread_.joinable()) thread_.join();
 }
 
-uint64_t Simulation::enqueue(CommandType type, double value) {
+uint64_t Simulation::enqueue(CommandType type, const Vec3& value) {
   std::lock_guard<std::mutex> lock(command_mutex_);
   if (commands_.size() >= kMaxQueuedCommands) return 0;  // refused: nothing queued, no number used
   const uint64_t seq = next_seq_++;
@@ -147,6 +165,7 @@ SimStatus Simulation::status() const {
   s.tick = status_tick_.load(std::memory_order_relaxed);
   s.sim_time = status_time_.load(std::memory_order_relaxed);
   s.force_command = status_force_.load(std::memory_order_relaxed);
+  s.position_mode = status_position_mode_.load(std::memory_order_relaxed);
   s.blow_ups = blow_ups_.load(std::memory_order_relaxed);
   std::lock_guard<std::mutex> lock(text_mutex_);
   s.last_blow_up = last_blow_up_;
@@ -170,6 +189,10 @@ void Simulation::prepare_and_build() {
   model_ = std::make_unique<Model>(build_model(scene_));
   check_cancelled();
   options_ = options_of(scene_);
+  initial_options_ = options_;
+  coupling_ = config_.coupling.stiffness > 0.0 ? clamp_to_device(config_.coupling, config_.device)
+                                               : default_coupling(*model_, options_, config_.device);
+  initial_coupling_ = coupling_;
   state_ = std::make_unique<State>(make_state(*model_, options_));
   divergence_bound_ = divergence_bound(*model_);
   rest_ = std::make_unique<Checkpoint>(*state_);
@@ -275,13 +298,26 @@ bool Simulation::tick_once() {
   }
   for (const Command& c : drained_) {
     switch (c.type) {
-      case CommandType::set_force: state.force_command = press_down(c.value); break;
+      case CommandType::set_force:
+        state.force_command = c.value;
+        set_position_mode(false);
+        break;
+      case CommandType::set_position:
+        state.tool_target = c.value;
+        state.force_command.setZero();
+        set_position_mode(true);
+        break;
+      case CommandType::set_coupling:
+        coupling_ = {c.value[0], c.value[1]};
+        set_position_mode(position_mode_);
+        break;
       case CommandType::reset: {
         rest_->restore(state);
         checkpoint_->save(state);
         state.time = 0.0;
         state.tick = 0;
         state.force_command = press_down(model.initial_force_command);
+        set_position_mode(false);
         ticks_since_recovery_ = -1;
         break;
       }
@@ -294,6 +330,7 @@ bool Simulation::tick_once() {
   drained_.clear();
   paused_flag_.store(paused_, std::memory_order_relaxed);
   status_force_.store(pressing_force(state), std::memory_order_relaxed);
+  status_position_mode_.store(position_mode_, std::memory_order_relaxed);
   if (paused_ && !config_.headless) {
     if (had_commands) publish();  // let subscribers see a reset while paused
     return false;
@@ -315,6 +352,12 @@ bool Simulation::tick_once() {
   return true;
 }
 
+// Force mode: the coupling off. Position mode: the session's coupling (docs/physics.md (2.6)).
+void Simulation::set_position_mode(bool on) {
+  position_mode_ = on;
+  options_.coupling = on ? coupling_ : CouplingOptions{};
+}
+
 // Restores the last good state. A second blow-up soon after a recovery means the
 // checkpoint itself was on its way out (or the command cannot be held): restore
 // the rest state and the scene's initial force instead.
@@ -325,13 +368,17 @@ void Simulation::recover(const std::string& what) {
   const bool again = ticks_since_recovery_ >= 0 && ticks_since_recovery_ <= 2 * config_.checkpoint_interval;
   std::string how;
   const double command = pressing_force(state);
+  const bool position_mode = position_mode_;
   if (again) {
     rest_->restore(state);
     checkpoint_->save(state);
     state.force_command = press_down(model.initial_force_command);
+    set_position_mode(false);
     status_force_.store(pressing_force(state), std::memory_order_relaxed);
+    status_position_mode_.store(false, std::memory_order_relaxed);
     how = "restored the rest state and the scene's initial force (" + std::to_string(pressing_force(state)) +
-          " N; the command was " + std::to_string(command) + " N)";
+          " N; the command was " +
+          (position_mode ? std::string("a position, now back in force mode") : std::to_string(command) + " N") + ")";
   } else {
     checkpoint_->restore(state);
     how = "restored the last checkpoint (every " + std::to_string(config_.checkpoint_interval) + " ticks)";
@@ -346,19 +393,41 @@ void Simulation::recover(const std::string& what) {
   spdlog::warn("session blow-up #{}: {}", count, message);
 }
 
+// The frame's local models (wire LocalModel): the contact force as a function of the
+// tool's centre, and the rendered force as a function of the device position.
+void Simulation::fill_local_models(Snapshot& s) const {
+  const State& state = *state_;
+  LocalModel& contact = s.contact_model;
+  contact.origin = state.indenter_center;
+  contact.force = state.indenter_contact_force;
+  contact.stiffness.setZero();
+  contact.valid_radius = 0.0;
+  contact.stiffness_tick = -1;
+  s.render_model = render_model(contact, position_mode_, state.tool_target, s.render_force, options_.coupling);
+}
+
 void Simulation::publish() {
   const Model& model = *model_;
   const State& state = *state_;
   Snapshot& s = frames_writer_.back();
   s.tick = state.tick;
   s.sim_time = state.time;
-  s.indenter[0] = state.indenter_center[0];
-  s.indenter[1] = state.indenter_center[1];
-  s.indenter[2] = state.indenter_center[2];
-  s.indenter_velocity = state.indenter_velocity[2];
-  s.contact_force = state.indenter_contact_force[2];
+  s.tool_position = state.indenter_center;
+  s.tool_velocity = state.indenter_velocity;
+  s.tool_contact_force = state.indenter_contact_force;
+  s.force_command = state.force_command;
+  s.position_mode = position_mode_;
+  s.target = state.tool_target;
+  // Position mode: the device feels the coupling's reaction, -(its force on the tool);
+  // force mode: the contact force, as if the device held the tool rigidly.
+  s.render_force = position_mode_ ? Vec3(-state.out.coupling_force) : state.indenter_contact_force;
+  s.force_saturated = false;
+  if (const double limit = config_.device.max_force; limit > 0.0 && s.render_force.norm() > limit) {
+    s.render_force *= limit / s.render_force.norm();
+    s.force_saturated = true;
+  }
+  fill_local_models(s);
   s.indentation = indentation(model, state);
-  s.force_command = pressing_force(state);
   s.command_seq = applied_seq_;
   s.recoveries = blow_ups_.load(std::memory_order_relaxed);
   s.has_positions = config_.headless || want_positions_.load(std::memory_order_relaxed);

@@ -27,6 +27,7 @@
 #include "core/scene.h"
 #include "core/state.h"
 #include "server/histogram.h"
+#include "server/local_model.h"
 #include "server/snapshot.h"
 
 namespace palpate::server {
@@ -36,6 +37,22 @@ int64_t now_ns();  // CLOCK_MONOTONIC
 // Unapplied commands a session holds; enqueue() refuses beyond.
 constexpr size_t kMaxQueuedCommands = 4096;
 
+// What the haptic device can render (OpenRequest.device); 0 = no limit.
+struct DeviceLimits {
+  double max_stiffness = 0.0;  // N/m
+  double max_damping = 0.0;    // N s/m
+  double max_force = 0.0;      // N
+};
+
+// The coupling of position commands (Options::coupling) within the device's limits.
+CouplingOptions clamp_to_device(CouplingOptions c, const DeviceLimits& device);
+
+// The coupling a position command gets unless the client asks for another: as stiff
+// as the contact of the sphere at d = R / 5 by Hertz (dF/dd = 2 E* sqrt(R d),
+// docs/physics.md §3), critically damped for the tool's mass (b = 2 sqrt(k M)), within
+// the device's limits.
+CouplingOptions default_coupling(const Model& model, const Options& opt, const DeviceLimits& device);
+
 // How a session runs; known before its scene is.
 struct SimConfig {
   bool headless = false;
@@ -43,6 +60,8 @@ struct SimConfig {
   double spin_margin_us = 200.0;  // sleep until this long before the deadline, then spin
   bool try_realtime = true;       // ask for SCHED_FIFO (silently refused when not allowed)
   int checkpoint_interval = 100;  // ticks between checkpoints of the last good state
+  DeviceLimits device;            // OpenRequest.device
+  CouplingOptions coupling;       // OpenRequest.coupling; stiffness 0 = default_coupling()
   // TEST HOOK (tests/server_simulation_test.cpp only; empty in the server): called on
   // the session's thread with the state just before each step, e.g. to inject a NaN.
   std::function<void(State&)> before_step_for_tests;
@@ -53,7 +72,10 @@ struct SimConfig {
 // its what() is the message the client gets.
 using ScenePreparer = std::function<Scene()>;
 
-enum class CommandType { set_force, reset, pause, resume };
+// set_force: Command::value is the force on the tool (N, world frame), force mode;
+// set_position: value is the device position (m), position mode;
+// set_coupling: value = (k N/m, b N s/m, unused), already clamped to the device.
+enum class CommandType { set_force, set_position, set_coupling, reset, pause, resume };
 
 enum class Phase { starting, ready, failed };
 
@@ -72,7 +94,8 @@ struct SimStatus {
   bool paused = false;
   int64_t tick = 0;
   double sim_time = 0.0;
-  double force_command = 0.0;
+  double force_command = 0.0;  // N, pressing (-z of the force command)
+  bool position_mode = false;
   uint32_t blow_ups = 0;
   std::string last_blow_up;
   int64_t last_blow_up_tick = -1;
@@ -102,10 +125,14 @@ class Simulation {
   const Scene& scene() const { return scene_; }
   const Model& model() const { return *model_; }
   double build_seconds() const { return build_seconds_; }
+  // The options the loop started with (the scene's), and the coupling in effect at the
+  // start (default_coupling, or the request's clamped): after phase() == ready only.
+  const Options& initial_options() const { return initial_options_; }
+  CouplingOptions initial_coupling() const { return initial_coupling_; }
 
   // RPC thread. Returns the command's sequence number (> 0), or 0 when the queue
   // already holds kMaxQueuedCommands commands (then nothing is queued or numbered).
-  uint64_t enqueue(CommandType type, double value = 0.0);
+  uint64_t enqueue(CommandType type, const Vec3& value = Vec3::Zero());
   // The subscribers' needs, read by the loop at each publish.
   void set_wanted(bool positions, bool contacts) {
     want_positions_.store(positions, std::memory_order_relaxed);
@@ -128,7 +155,7 @@ class Simulation {
  private:
   struct Command {
     CommandType type;
-    double value;
+    Vec3 value;
     uint64_t seq;
   };
 
@@ -140,6 +167,8 @@ class Simulation {
   // Drains commands and steps once; false when paused (no step).
   bool tick_once();
   void recover(const std::string& what);
+  void set_position_mode(bool on);
+  void fill_local_models(Snapshot& s) const;
   void publish();
   void notify();
 
@@ -152,9 +181,13 @@ class Simulation {
   Scene scene_;
   std::unique_ptr<Model> model_;
   double build_seconds_ = 0.0;
+  Options initial_options_;
+  CouplingOptions initial_coupling_;
 
   // Sim thread only.
-  Options options_;  // the scene's (options_of); the loop steps with them
+  Options options_;  // the scene's (options_of) and the coupling of the mode; the loop steps with them
+  bool position_mode_ = false;  // options_.coupling is on (set_position) or off (set_force)
+  CouplingOptions coupling_;    // the session's coupling, used in position mode
   std::unique_ptr<State> state_;
   double divergence_bound_ = 0.0;  // m, see diverged() in sim_loop.cpp
   std::unique_ptr<Checkpoint> rest_, checkpoint_;
@@ -194,6 +227,7 @@ class Simulation {
   std::atomic<bool> paused_flag_{false};
   std::atomic<int64_t> status_tick_{0};
   std::atomic<double> status_time_{0.0}, status_force_{0.0};
+  std::atomic<bool> status_position_mode_{false};
   Histogram step_us_, lateness_us_;
 
   // Written by the sim thread, read by any thread, under text_mutex_.

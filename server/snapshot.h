@@ -10,17 +10,34 @@
 #include <utility>
 #include <vector>
 
+#include "core/types.h"
+
 namespace palpate::server {
+
+// A force near a point, linearised: F(x) = force + stiffness (x - origin) for
+// |x - origin| <= valid_radius (wire LocalModel; docs/protocol.md).
+struct LocalModel {
+  Vec3 origin{0, 0, 0};        // m
+  Vec3 force{0, 0, 0};         // N
+  Mat3 stiffness = Mat3::Zero();  // N/m, dF/dx
+  double valid_radius = 0.0;   // m
+  int64_t stiffness_tick = -1; // tick of the state the stiffness comes from (-1: none yet)
+};
 
 struct Snapshot {
   int64_t tick = 0;
   double sim_time = 0.0;               // s
   int64_t publish_ns = 0;              // CLOCK_MONOTONIC, ns
-  double indenter[3] = {0, 0, 0};      // m
-  double indenter_velocity = 0.0;      // m/s along z
-  double contact_force = 0.0;          // N, on the indenter (positive up)
+  Vec3 tool_position{0, 0, 0};         // m
+  Vec3 tool_velocity{0, 0, 0};         // m/s
+  Vec3 tool_contact_force{0, 0, 0};    // N, of the body on the tool
+  Vec3 force_command{0, 0, 0};         // N, force mode (zero in position mode)
+  bool position_mode = false;
+  Vec3 target{0, 0, 0};                // m, device position (position mode)
+  Vec3 render_force{0, 0, 0};          // N, for the device (wire Frame.renderForce)
+  bool force_saturated = false;
+  LocalModel contact_model, render_model;
   double indentation = 0.0;            // m
-  double force_command = 0.0;          // N
   uint64_t command_seq = 0;
   uint32_t recoveries = 0;
   bool has_positions = false;          // positions filled (someone wanted them)

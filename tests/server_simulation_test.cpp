@@ -66,9 +66,10 @@ const Snapshot& step(Simulation& sim, uint32_t n) {
 }
 
 bool finite(const Snapshot& s) {
-  bool ok = std::isfinite(s.sim_time) && std::isfinite(s.indenter_velocity) && std::isfinite(s.contact_force) &&
-            std::isfinite(s.indentation) && std::isfinite(s.force_command);
-  for (double x : s.indenter) ok = ok && std::isfinite(x);
+  bool ok = std::isfinite(s.sim_time) && s.tool_velocity.allFinite() && s.tool_contact_force.allFinite() &&
+            std::isfinite(s.indentation) && s.force_command.allFinite() && s.tool_position.allFinite() &&
+            s.render_force.allFinite() && s.contact_model.stiffness.allFinite() &&
+            s.render_model.stiffness.allFinite();
   for (float x : s.positions) ok = ok && std::isfinite(x);
   for (float x : s.contact_forces) ok = ok && std::isfinite(x);
   return ok;
@@ -88,7 +89,7 @@ TEST(Simulation, TheSceneIsPreparedOnTheSessionsThread) {
   // The rest state is published before the session is ready.
   ASSERT_TRUE(sim.frames().take());
   EXPECT_EQ(sim.frames().front().tick, 0);
-  EXPECT_EQ(sim.frames().front().force_command, 5.0);
+  EXPECT_EQ(sim.frames().front().force_command, press_down(5.0));
 }
 
 TEST(Simulation, AFailedPreparationFailsTheSessionWithItsMessage) {
@@ -158,7 +159,7 @@ TEST(Simulation, BlowUpsRecoverFromTheCheckpointThenFromRest) {
   const std::vector<float> rest = sim.frames().front().positions;
   ASSERT_EQ(rest.size(), 3u * 125);
 
-  ASSERT_GT(sim.enqueue(CommandType::set_force, 40.0), 0u);
+  ASSERT_GT(sim.enqueue(CommandType::set_force, press_down(40.0)), 0u);
   std::vector<std::vector<float>> positions(701);  // by tick
   std::vector<uint32_t> recoveries(701);
   for (int64_t tick = 1; tick <= 700; ++tick) {
@@ -170,7 +171,7 @@ TEST(Simulation, BlowUpsRecoverFromTheCheckpointThenFromRest) {
     if (tick == 250) {  // 1st: the checkpoint of tick 200, the command kept
       EXPECT_EQ(f.recoveries, 1u);
       EXPECT_EQ(f.positions, positions[200]);
-      EXPECT_EQ(f.force_command, 40.0);
+      EXPECT_EQ(f.force_command, press_down(40.0));
       const SimStatus st = sim.status();
       EXPECT_EQ(st.blow_ups, 1u);
       EXPECT_EQ(st.last_blow_up_tick, 250);
@@ -180,7 +181,7 @@ TEST(Simulation, BlowUpsRecoverFromTheCheckpointThenFromRest) {
     if (tick == 300) {  // 2nd, 50 ticks later: the rest state and the scene's initial force
       EXPECT_EQ(f.recoveries, 2u);
       EXPECT_EQ(f.positions, rest);
-      EXPECT_EQ(f.force_command, 5.0);
+      EXPECT_EQ(f.force_command, press_down(5.0));
       const SimStatus st = sim.status();
       EXPECT_EQ(st.blow_ups, 2u);
       EXPECT_EQ(st.last_blow_up_tick, 300);
@@ -215,7 +216,7 @@ TEST(Simulation, AnUnstableSceneIsRecoveredAndNeverPublished) {
                                          {"integrator.allow_unstable_dt", "true"}}));
   wait_until_started(sim);
   ASSERT_EQ(sim.phase(), Phase::ready);
-  ASSERT_GT(sim.enqueue(CommandType::set_force, 100.0), 0u);
+  ASSERT_GT(sim.enqueue(CommandType::set_force, press_down(100.0)), 0u);
   for (int tick = 1; tick <= 1000; ++tick) {
     const Snapshot& f = step(sim, 1);
     ASSERT_TRUE(finite(f)) << "a non-finite frame at tick " << f.tick;
@@ -233,14 +234,14 @@ TEST(Simulation, AFullCommandQueueRefusesCommands) {
   wait_until_started(sim);
   ASSERT_EQ(sim.phase(), Phase::ready);
   for (uint64_t k = 1; k <= kMaxQueuedCommands; ++k)
-    ASSERT_EQ(sim.enqueue(CommandType::set_force, static_cast<double>(k % 50)), k);
-  EXPECT_EQ(sim.enqueue(CommandType::set_force, 49.5), 0u);
+    ASSERT_EQ(sim.enqueue(CommandType::set_force, press_down(static_cast<double>(k % 50))), k);
+  EXPECT_EQ(sim.enqueue(CommandType::set_force, press_down(49.5)), 0u);
   EXPECT_EQ(sim.enqueue(CommandType::reset), 0u);
   const Snapshot& f = step(sim, 1);  // drains the queue
   EXPECT_EQ(f.command_seq, kMaxQueuedCommands);
-  EXPECT_EQ(f.force_command, static_cast<double>(kMaxQueuedCommands % 50));
+  EXPECT_EQ(f.force_command, press_down(static_cast<double>(kMaxQueuedCommands % 50)));
   EXPECT_EQ(f.tick, 1) << "the refused reset was not applied";
-  EXPECT_EQ(sim.enqueue(CommandType::set_force, 1.0), kMaxQueuedCommands + 1);
+  EXPECT_EQ(sim.enqueue(CommandType::set_force, press_down(1.0)), kMaxQueuedCommands + 1);
 }
 
 }  // namespace

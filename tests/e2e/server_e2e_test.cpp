@@ -10,6 +10,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -254,7 +255,8 @@ class RecordingSink final : public FrameSink::Server {
 };
 
 struct Client {
-  Client() : ez(g_server->address()), server(ez.getMain<PalpateServer>()) {}
+  Client() : Client(g_server->address()) {}
+  explicit Client(const std::string& address) : ez(address), server(ez.getMain<PalpateServer>()) {}
   capnp::EzRpcClient ez;
   PalpateServer::Client server;
   kj::WaitScope& ws() { return ez.getWaitScope(); }
@@ -268,6 +270,27 @@ struct Client {
     auto o = r.initOverrides(static_cast<unsigned>(overrides.size()));
     for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
     r.setHeadless(headless);
+    return req.send().wait(ws()).getSession();
+  }
+
+  // The hertz_cube of open() with the tool free in 3-D, opened with `device` limits
+  // (max stiffness N/m, max damping N s/m, max force N; 0 = none) and a requested coupling.
+  Session::Client open_free(bool headless, double max_stiffness = 0, double max_damping = 0, double max_force = 0,
+                            double stiffness = 0, double damping = 0) {
+    auto req = server.openSessionRequest();
+    auto r = req.initRequest();
+    r.getScene().setName("hertz_cube");
+    auto o = r.initOverrides(2);
+    o.set(0, "body.distribution.per_edge=8");
+    o.set(1, "indenter.guide=free");
+    r.setHeadless(headless);
+    auto d = r.initDevice();
+    d.setMaxStiffness(max_stiffness);
+    d.setMaxDamping(max_damping);
+    d.setMaxForce(max_force);
+    auto c = r.initCoupling();
+    c.setStiffness(stiffness);
+    c.setDamping(damping);
     return req.send().wait(ws()).getSession();
   }
 
@@ -800,6 +823,191 @@ TEST(ServerE2E, ABrokenDefaultSceneStopsTheServerBeforeItListens) {
     EXPECT_NE(r.err.find("palpate-server: --scene: "), std::string::npos) << r.err;
     EXPECT_NE(r.err.find(c.expected), std::string::npos) << "expected '" << c.expected << "' in: " << r.err;
   }
+}
+
+// ---------------------------------------------------------------------------
+// The 3-D tool (protocol 2).
+
+palpate::wire::Frame::Reader step_frame(Client& c, Session::Client& s, uint32_t n,
+                                        kj::Own<capnp::Response<Session::StepResults>>& keep) {
+  auto req = s.stepRequest();
+  req.setN(n);
+  keep = kj::heap(req.send().wait(c.ws()));
+  return keep->getFrame();
+}
+
+double distance(palpate::wire::Vec3::Reader a, double x, double y, double z) {
+  return std::sqrt(std::pow(a.getX() - x, 2) + std::pow(a.getY() - y, 2) + std::pow(a.getZ() - z, 2));
+}
+
+TEST(ServerE2E, PositionCommandsDriveTheToolThroughTheCoupling) {
+  Client c;
+  auto session = c.open_free(true);
+  auto info_response = session.infoRequest().send().wait(c.ws());
+  auto info = info_response.getInfo();
+  EXPECT_EQ(info.getGuide(), palpate::wire::ToolGuide::FREE);
+  ASSERT_GT(info.getCoupling().getStiffness(), 0.0);  // the default coupling
+  ASSERT_GT(info.getCoupling().getDamping(), 0.0);
+  const double top = info.getTouchHeight() - info.getRadius();  // z of the top face
+  const double R = info.getRadius();
+
+  // In the air: the tool goes to the device position and nothing is rendered.
+  const double ax = 0.2, ay = -0.1, az = info.getTouchHeight() + 0.3;
+  auto to = session.setPositionRequest();
+  to.initPosition().setX(ax);
+  to.getPosition().setY(ay);
+  to.getPosition().setZ(az);
+  to.send().wait(c.ws());
+  kj::Own<capnp::Response<Session::StepResults>> keep;
+  auto air = step_frame(c, session, 3000, keep);
+  EXPECT_EQ(air.getMode(), palpate::wire::ControlMode::POSITION);
+  EXPECT_LT(distance(air.getIndenterPosition(), ax, ay, az), 1e-4 * R);
+  EXPECT_LT(distance(air.getRenderForce(), 0, 0, 0), 1e-6);
+  EXPECT_EQ(air.getToolContactForce().getZ(), 0.0);
+
+  // Pressed 0.1 R below first touch at (ax, ay): at rest the coupling balances the
+  // contact, so the rendered force is the contact force (pushing the device up).
+  auto press = session.setPositionRequest();
+  press.initPosition().setX(ax);
+  press.getPosition().setY(ay);
+  press.getPosition().setZ(info.getTouchHeight() - 0.1 * R);
+  press.send().wait(c.ws());
+  auto held = step_frame(c, session, 6000, keep);
+  const double fz = held.getToolContactForce().getZ();
+  EXPECT_GT(fz, 0.0);
+  EXPECT_NEAR(held.getRenderForce().getZ(), fz, 0.01 * fz);
+  EXPECT_NEAR(held.getRenderForce().getX(), held.getToolContactForce().getX(), 0.01 * fz);
+  EXPECT_LT(std::abs(held.getIndenterPosition().getX() - ax), 0.01 * R);  // frictionless: no lateral drift
+  EXPECT_LT(held.getIndenterPosition().getZ(), info.getTouchHeight());
+  EXPECT_GT(held.getIndenterPosition().getZ(), top);
+
+  // Refused commands name the field and change nothing.
+  const double wx = info.getWorkspaceMax().getX();
+  for (auto bad : std::vector<std::array<double, 3>>{{std::nan(""), 0, 0}, {wx + 0.01, 0, az}, {0, 0, HUGE_VAL}}) {
+    auto req = session.setPositionRequest();
+    req.initPosition().setX(bad[0]);
+    req.getPosition().setY(bad[1]);
+    req.getPosition().setZ(bad[2]);
+    EXPECT_NE(c.error_of(req).find("setPosition: position"), std::string::npos);
+  }
+  const double limit = info.getForceLimit();
+  for (auto bad : std::vector<std::array<double, 3>>{{0, std::nan(""), 0}, {limit, limit, 0}, {0, 0, -HUGE_VAL}}) {
+    auto req = session.setForceVectorRequest();
+    req.initForce().setX(bad[0]);
+    req.getForce().setY(bad[1]);
+    req.getForce().setZ(bad[2]);
+    EXPECT_NE(c.error_of(req).find("setForceVector: force"), std::string::npos);
+  }
+  auto after = step_frame(c, session, 1, keep);
+  EXPECT_EQ(after.getMode(), palpate::wire::ControlMode::POSITION);
+  EXPECT_EQ(after.getTarget().getX(), ax);
+  EXPECT_EQ(after.getTarget().getZ(), info.getTouchHeight() - 0.1 * R);
+
+  // A force vector: force mode again, the command as sent.
+  auto push = session.setForceVectorRequest();
+  push.initForce().setX(0.0);
+  push.getForce().setY(0.0);
+  push.getForce().setZ(-20.0);
+  push.send().wait(c.ws());
+  auto forced = step_frame(c, session, 1, keep);
+  EXPECT_EQ(forced.getMode(), palpate::wire::ControlMode::FORCE);
+  EXPECT_EQ(forced.getForceVector().getZ(), -20.0);
+  EXPECT_EQ(forced.getForceCommand(), 20.0);  // the pressing scalar
+}
+
+TEST(ServerE2E, DeviceLimitsClampTheCouplingAndTheRenderedForce) {
+  Client c;
+  auto session = c.open_free(true, 300.0, 2.0, 1.5, 1e6, 1e3);
+  auto info_response = session.infoRequest().send().wait(c.ws());
+  auto info = info_response.getInfo();
+  EXPECT_EQ(info.getCoupling().getStiffness(), 300.0);
+  EXPECT_EQ(info.getCoupling().getDamping(), 2.0);
+  EXPECT_EQ(info.getDevice().getMaxForce(), 1.5);
+  auto set = session.setCouplingRequest();
+  set.initCoupling().setStiffness(100.0);
+  set.getCoupling().setDamping(50.0);
+  auto applied = set.send().wait(c.ws());
+  EXPECT_EQ(applied.getCoupling().getStiffness(), 100.0);
+  EXPECT_EQ(applied.getCoupling().getDamping(), 2.0);
+  auto negative = session.setCouplingRequest();
+  negative.initCoupling().setStiffness(-1.0);
+  EXPECT_NE(c.error_of(negative).find("setCoupling: coupling.stiffness"), std::string::npos);
+
+  // Deep below the surface: k x 0.5 m = 50 N wanted, 1.5 N rendered at most.
+  auto press = session.setPositionRequest();
+  press.initPosition().setX(0.0);
+  press.getPosition().setY(0.0);
+  press.getPosition().setZ(info.getTouchHeight() - 0.5);
+  press.send().wait(c.ws());
+  kj::Own<capnp::Response<Session::StepResults>> keep;
+  auto f = step_frame(c, session, 200, keep);
+  EXPECT_TRUE(f.getForceSaturated());
+  EXPECT_NEAR(distance(f.getRenderForce(), 0, 0, 0), 1.5, 1e-9);
+
+  // Refused device limits name the field.
+  auto req = c.server.openSessionRequest();
+  req.initRequest().initDevice().setMaxStiffness(-5.0);
+  EXPECT_NE(c.error_of(req).find("request.device.maxStiffness"), std::string::npos);
+}
+
+TEST(ServerE2E, CancelAndCloseEndStreamsWithDone) {
+  Client c;
+  auto session = c.open(false);
+  std::vector<FrameSink::Client> sinks;  // held here: the sinks outlive the server's references
+  auto subscribe = [&](RecordingSink*& out) {
+    auto owner = kj::heap<RecordingSink>();
+    out = owner.get();
+    sinks.push_back(kj::mv(owner));
+    auto sub = session.subscribeRequest();
+    sub.setSink(sinks.back());
+    sub.getOptions().setRateHz(200);
+    return sub.send().wait(c.ws()).getSubscription();
+  };
+  RecordingSink *a = nullptr, *b = nullptr;
+  auto handle_a = subscribe(a);
+  auto handle_b = subscribe(b);  // both handles kept: only cancel() and close() may end them
+  c.pump(200);
+  ASSERT_GT(a->frames.size(), 5u);
+  handle_a.cancelRequest().send().wait(c.ws());
+  c.pump(50);
+  EXPECT_TRUE(a->finished);
+  const size_t after_cancel = a->frames.size();
+  handle_a.cancelRequest().send().wait(c.ws());  // idempotent
+  c.pump(100);
+  EXPECT_EQ(a->frames.size(), after_cancel);
+  EXPECT_FALSE(b->finished);
+  EXPECT_GT(b->frames.size(), after_cancel / 2);
+
+  session.closeRequest().send().wait(c.ws());
+  c.pump(50);
+  EXPECT_TRUE(b->finished);
+  auto set = session.setForceRequest();
+  set.setNewtons(1.0);
+  EXPECT_NE(c.error_of(set).find("the session is closed"), std::string::npos);
+  EXPECT_TRUE(session.statusRequest().send().wait(c.ws()).getStatus().getClosed());
+  const int64_t tick = session.statusRequest().send().wait(c.ws()).getStatus().getTick();
+  c.pump(50);
+  EXPECT_EQ(session.statusRequest().send().wait(c.ws()).getStatus().getTick(), tick);  // the loop stopped
+  session.closeRequest().send().wait(c.ws());  // idempotent
+}
+
+TEST(ServerE2E, ShutdownDeliversDoneToEverySubscriber) {
+  ServerProcess own;
+  Client c(own.address());
+  auto session = c.open(false);
+  auto owner = kj::heap<RecordingSink>();
+  RecordingSink& sink = *owner;
+  FrameSink::Client sink_cap = kj::mv(owner);  // held here: the sink outlives the server's reference
+  auto sub = session.subscribeRequest();
+  sub.setSink(sink_cap);
+  sub.getOptions().setRateHz(100);
+  auto handle = sub.send().wait(c.ws()).getSubscription();
+  c.pump(100);
+  ASSERT_FALSE(sink.frames.empty());
+  kill(own.pid(), SIGTERM);
+  for (int k = 0; k < 100 && !sink.finished; ++k) c.pump(20);
+  EXPECT_TRUE(sink.finished) << "no FrameSink.done before the server exited";
+  EXPECT_EQ(own.terminate(std::chrono::seconds(5)), 0);
 }
 
 // The network programs share the argument helper (cli/arguments.h): --help prints the

@@ -1,0 +1,93 @@
+// The rendered force's local model (server/local_model.h) against the quasi-static
+// equilibrium it linearises, solved directly: a tool between the virtual coupling
+// k (x_d - c) and a contact force F_c(c) that is not linear (a Hertz-like normal
+// law and a lateral spring), at rest where k (x_d - c) + F_c(c) = 0.
+#include <cmath>
+
+#include <Eigen/LU>
+#include <gtest/gtest.h>
+
+#include "server/local_model.h"
+
+namespace {
+
+using palpate::CouplingOptions;
+using palpate::Mat3;
+using palpate::Vec3;
+using palpate::server::LocalModel;
+using palpate::server::render_model;
+
+// A contact force on the tool at c: the surface z = 0 pushes up with a^1.5 (Hertz:
+// F ~ d^(3/2)) and pulls x toward 0 with a lateral stiffness growing with the depth.
+Vec3 contact_force(const Vec3& c) {
+  const double d = std::max(0.0, -c[2]);
+  return Vec3(-40.0 * d * c[0], -15.0 * d * c[1], 1e3 * std::pow(d, 1.5));
+}
+Mat3 contact_stiffness(const Vec3& c) {  // dF/dc, by hand
+  const double d = std::max(0.0, -c[2]);
+  Mat3 K = Mat3::Zero();
+  K(0, 0) = -40.0 * d;
+  K(0, 2) = 40.0 * c[0];
+  K(1, 1) = -15.0 * d;
+  K(1, 2) = 15.0 * c[1];
+  K(2, 2) = -1.5e3 * std::sqrt(d);
+  return K;
+}
+
+// The tool's rest position for the device at x_d (Newton on the force balance).
+Vec3 rest_tool(const Vec3& xd, double k) {
+  Vec3 c = xd;
+  for (int it = 0; it < 100; ++it) {
+    const Vec3 r = k * (xd - c) + contact_force(c);
+    const Mat3 J = -k * Mat3::Identity() + contact_stiffness(c);
+    c -= J.lu().solve(r);
+  }
+  return c;
+}
+
+Vec3 rendered(const Vec3& xd, double k) { return -k * (xd - rest_tool(xd, k)); }
+
+TEST(LocalModel, RenderStiffnessIsTheCouplingAndTheContactInSeries) {
+  const double k = 300.0;
+  const Vec3 xd(0.004, -0.003, -0.02);
+  const Vec3 c = rest_tool(xd, k);
+  LocalModel contact;
+  contact.origin = c;
+  contact.force = contact_force(c);
+  contact.stiffness = contact_stiffness(c);
+  const LocalModel r = render_model(contact, true, xd, rendered(xd, k), CouplingOptions{k, 5.0});
+  EXPECT_EQ(r.origin, xd);
+  // Central differences of the exact equilibrium, column by column.
+  const double h = 1e-6;
+  for (int j = 0; j < 3; ++j) {
+    const Vec3 e = Vec3::Unit(j) * h;
+    const Vec3 column = (rendered(xd + e, k) - rendered(xd - e, k)) / (2 * h);
+    for (int i = 0; i < 3; ++i)
+      EXPECT_NEAR(r.stiffness(i, j), column[i], 1e-6 * r.stiffness.norm()) << i << "," << j;
+  }
+  // The device feels less than either spring alone along z (series), and the model
+  // predicts a small move to second order.
+  EXPECT_LT(std::abs(r.stiffness(2, 2)), std::min(k, std::abs(contact.stiffness(2, 2))));
+  const Vec3 dx(2e-4, -1e-4, -3e-4);
+  const Vec3 predicted = r.force + r.stiffness * dx;
+  const Vec3 predicted_half = r.force + r.stiffness * (dx / 2);
+  const double e1 = (predicted - rendered(xd + dx, k)).norm();
+  const double e2 = (predicted_half - rendered(xd + dx / 2, k)).norm();
+  EXPECT_NEAR(e1 / e2, 4.0, 0.5);
+}
+
+TEST(LocalModel, ForceModeRendersTheContactModelItself) {
+  LocalModel contact;
+  contact.origin = Vec3(1, 2, 3);
+  contact.force = Vec3(0, 0, 4);
+  contact.stiffness = -Mat3::Identity() * 7.0;
+  contact.valid_radius = 0.01;
+  contact.stiffness_tick = 42;
+  const LocalModel r = render_model(contact, false, Vec3(9, 9, 9), Vec3(5, 5, 5), CouplingOptions{100.0, 1.0});
+  EXPECT_EQ(r.origin, contact.origin);
+  EXPECT_EQ(r.force, contact.force);
+  EXPECT_EQ(r.stiffness, contact.stiffness);
+  EXPECT_EQ(r.stiffness_tick, 42);
+}
+
+}  // namespace
