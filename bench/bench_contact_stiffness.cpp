@@ -50,7 +50,7 @@ Exit status: 0, 1 on a scene that does not load or a press that fails, 2 on a wr
 )";
 
 struct Stats {
-  double median = 0, p90 = 0, max = 0;
+  double min = 0, median = 0, p90 = 0, max = 0;
 };
 Stats stats(std::vector<double> v) {
   Stats s;
@@ -59,10 +59,13 @@ Stats stats(std::vector<double> v) {
   const size_t k = v.size() / 2;
   s.median = v.size() % 2 ? v[k] : 0.5 * (v[k - 1] + v[k]);
   s.p90 = v[std::min(v.size() - 1, static_cast<size_t>(0.9 * static_cast<double>(v.size())))];
+  s.min = v.front();
   s.max = v.back();
   return s;
 }
-nlohmann::json to_json(const Stats& s) { return {{"median", s.median}, {"p90", s.p90}, {"max", s.max}}; }
+nlohmann::json to_json(const Stats& s) {
+  return {{"min", s.min}, {"median", s.median}, {"p90", s.p90}, {"max", s.max}};
+}
 
 }  // namespace
 
@@ -183,8 +186,8 @@ int main(int argc, char** argv) {
               warm.p90, warm.max, wi.median, wi.p90, wi.max);
   std::printf("  %-28s %9.3f ms (%.3f, %.3f)   CG iterations %g (%g, %g)\n", "evaluate(), cold", cold_s.median,
               cold_s.p90, cold_s.max, ci.median, ci.p90, ci.max);
-  std::printf("  %-28s %9.3g m (p90 %.3g, max %.3g); active %g (%g, %g)\n", "valid radius", rad.median, rad.p90,
-              rad.max, act.median, act.p90, act.max);
+  std::printf("  %-28s %9.3g m (min %.3g, p90 %.3g, max %.3g); active %g (%g, %g)\n", "valid radius", rad.median,
+              rad.min, rad.p90, rad.max, act.median, act.p90, act.max);
   if (not_converged || bad_steps)
     std::printf("warning: %d evaluations did not converge, %d steps were not ok\n", not_converged, bad_steps);
   return 0;

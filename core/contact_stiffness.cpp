@@ -224,7 +224,7 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
   out.active_count = m;
 
   if (m == 0) {
-    // No contact (2.14): F0 = 0, K = 0, the radius is the distance to the nearest free particle.
+    // No contact (2.15): F0 = 0, K = 0, the radius is the distance to the nearest free particle.
     clear_warm_start();
     double nearest = std::numeric_limits<double>::infinity();
     for (int j = 0; j < n; ++j) {
@@ -270,13 +270,13 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
       const Vec3 nrm = normal_.col(a);
       const double dmu = -nrm.dot(df_.col(i));
       multiplier_response_(a, j) = dmu;
-      const Vec3 rel = dx.col(i) - e;
+      const Vec3 rel = dx.col(i) - e;  // r_a dn_a = (I - n n^T)(dx_a - dc) (2.9)
       dF -= dmu * nrm + geometric_[a] * (rel - nrm.dot(rel) * nrm);
     }
     out.stiffness.col(j) = dF;
   }
 
-  // The validity radius (2.13): the smallest tool displacement that changes the active set,
+  // The validity radius (2.14): the smallest tool displacement that changes the active set,
   // to first order, over every direction.
   out.valid_radius = std::numeric_limits<double>::infinity();
   for (int a = 0; a < m; ++a) {  // an active particle leaves when mu_a + grad mu_a . dc reaches 0

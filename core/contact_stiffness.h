@@ -1,5 +1,5 @@
 #pragma once
-// The local contact model (docs/physics.md §2, "The local contact model", (2.7)-(2.14)):
+// The local contact model (docs/physics.md §2, "The local contact model", (2.7)-(2.15)):
 // the linearisation of the contact force on the tool about the tool's current centre,
 //
 //   F(x) ~ F0 + K (x - x0),   |x - x0| <= valid_radius,
@@ -8,12 +8,14 @@
 // is the quasi-static stiffness of the contact for the current active set: what a finite
 // difference of two static solves with the tool held at nearby positions gives, not the
 // one-step inertial response. For a tool displacement dc the active particles stay on
-// the sphere (2.7), the free particles stay in equilibrium with the contact multipliers
-// at the active particles as the only new loads (2.8), which is a minimisation over the
-// subspace of admissible displacements (2.9) solved by projected conjugate gradients
-// (2.10), three solves (dc = e_x, e_y, e_z), each warm-started from the previous call's.
-// The reactions (2.11) and the normals' rotation give dF (2.12); the validity radius
-// (2.13), (2.14) is how far the tool may move before the active set changes.
+// the sphere (2.7) and the free particles stay in equilibrium (2.8), the contact
+// multipliers at the active particles being the only new loads, with the stiffness of
+// the normals' rotation (2.9). The particles' displacement solves a symmetric system on
+// the subspace of admissible displacements (2.10), by projected conjugate gradients:
+// three solves (dc = e_x, e_y, e_z), each warm-started from the previous call's. The
+// reactions (2.11) and the normals' rotation give dF (2.12); K is symmetric (2.13). The
+// validity radius (2.14), (2.15) is how far the tool may move before the active set
+// changes, to first order.
 //
 // A stage of its own: it reads a Model and a CarriedState and changes neither of
 // them, so a caller may run it on its own thread on a copy of the state. Each instance
@@ -34,16 +36,16 @@ struct LocalContactModel {
   Vec3 origin{0, 0, 0};           // m, the tool centre x0 (State::indenter_center)
   Vec3 force{0, 0, 0};            // N, F0 = State::indenter_contact_force
   Mat3 stiffness = Mat3::Zero();  // N/m, K = dF/dx (2.12), column j = dF for dc = e_j
-  double valid_radius = 0.0;      // m (2.13), (2.14)
+  double valid_radius = 0.0;      // m (2.14), (2.15)
   int64_t tick = 0;               // the state's tick it was computed at
   int active_count = 0;           // particles in contact (the active set of (2.7))
   int cg_iterations = 0;          // projected CG iterations of the three solves (2.10)
   bool converged = true;          // all three solves met the tolerance
   // Which bound set valid_radius, and where and along which direction it is reached.
   enum class Limit {
-    no_contact,  // no active particle: the distance to the nearest free particle (2.14)
-    entering,    // a particle outside the active set reaches the sphere (2.13)
-    leaving,     // an active particle's multiplier reaches zero (2.13)
+    no_contact,  // no active particle: the distance to the nearest free particle (2.15)
+    entering,    // a particle outside the active set reaches the sphere (2.14)
+    leaving,     // an active particle's multiplier reaches zero (2.14)
   };
   Limit limited_by = Limit::no_contact;
   int limiting_particle = -1;           // the particle that enters or leaves (-1: none)

@@ -1,5 +1,5 @@
 // The local contact model (core/contact_stiffness.h, docs/physics.md §2 "The local contact
-// model", (2.7)-(2.14)) against independent truths:
+// model", (2.7)-(2.15)) against independent truths:
 //  - K against central finite differences of full static solves with the tool held at
 //    x0 +- h e_j (analysis/static_contact.h relax_to_rest_at: the nonlinear equilibrium of
 //    the step's own contact, found by continuation, nothing shared with (2.10)), for the
@@ -124,7 +124,7 @@ void expect_matches_finite_difference(const test::Setup& s, const State& x0, con
       EXPECT_LT(error, 2e-5 * scale) << "K\n" << K << "\nfinite difference\n" << fd;
     }
   }
-  // The exact Hessian of the held energy (2.15) is symmetric.
+  // K = -d^2 Pi / dc^2 (2.13) is symmetric.
   EXPECT_LT(max_abs(K - K.transpose()), 1e-6 * scale) << K;
 }
 
