@@ -350,6 +350,7 @@ struct Stats {
   subscribers @11 :List(SubscriberStats);
   realtimePriority @12 :Bool;     # SCHED_FIFO granted to the loop thread
   spinMarginUs @13 :Float64;      # the loop sleeps until this long before a deadline, then spins
+  stiffnessEvaluations @14 :UInt64;  # contact stiffnesses computed for the local models (docs/protocol.md)
 }
 
 enum RunState {

@@ -1,19 +1,139 @@
 #include "server/local_model.h"
 
+#include <pthread.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <algorithm>
+
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
+#include <spdlog/spdlog.h>
 
 namespace palpate::server {
 
+StiffnessSource::StiffnessSource(const Model& model, bool worker_thread)
+    : model_(model), threaded_(worker_thread), stiffness_(model) {
+  newest_.tick = -1;
+  if (threaded_) {
+    input_ = make_state(model, Options{});  // sized once: later copies reuse the storage
+    thread_ = std::thread([this] { run(); });
+  }
+}
+
+StiffnessSource::~StiffnessSource() {
+  if (!threaded_) return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  thread_.join();
+}
+
+void StiffnessSource::offer(const State& state) {
+  if (!threaded_) {
+    newest_ = stiffness_.evaluate(model_, state);
+    evaluations_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+  if (!lock.owns_lock()) return;  // the worker is taking its input or writing a result: next tick
+  if (result_fresh_) {
+    if (result_generation_ == generation_) newest_ = result_;
+    result_fresh_ = false;
+  }
+  if (!busy_ && !pending_) {
+    input_ = state;  // CarriedState part; same sizes, no allocation
+    input_generation_ = generation_;
+    pending_ = true;
+    lock.unlock();
+    wake_.notify_one();
+  }
+}
+
+void StiffnessSource::invalidate() {
+  ++generation_;
+  newest_ = LocalContactModel{};
+  newest_.tick = -1;
+  if (!threaded_) stiffness_.clear_warm_start();
+}
+
+void StiffnessSource::run() {
+  // Below the loop (SCHED_FIFO 10 when granted, else an ordinary thread) and the RPC
+  // thread: an idle-priority share of the machine.
+  sched_param normal{};
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
+  setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
+  CarriedState work = input_;
+  uint64_t warm_generation = 0;
+  for (;;) {
+    uint64_t generation = 0;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait(lock, [this] { return stop_ || pending_; });
+      if (stop_) return;
+      std::swap(work, input_);
+      generation = input_generation_;
+      pending_ = false;
+      busy_ = true;
+    }
+    if (generation != warm_generation) {
+      stiffness_.clear_warm_start();
+      warm_generation = generation;
+    }
+    LocalContactModel result;
+    try {
+      result = stiffness_.evaluate(model_, work);
+    } catch (const std::exception& e) {  // a state that does not belong to the model: a bug
+      spdlog::error("contact stiffness: {}", e.what());
+      result = LocalContactModel{};
+      result.tick = -1;
+    }
+    evaluations_.fetch_add(1, std::memory_order_relaxed);
+    std::lock_guard<std::mutex> lock(mutex_);
+    result_ = result;
+    result_generation_ = generation;
+    result_fresh_ = true;
+    busy_ = false;
+  }
+}
+
+LocalModel contact_model_now(const State& state, const LocalContactModel& newest) {
+  LocalModel m;
+  m.origin = state.indenter_center;
+  m.force = state.indenter_contact_force;
+  m.stiffness_tick = newest.tick;
+  if (newest.tick < 0) return m;
+  const double moved = (state.indenter_center - newest.origin).norm();
+  const bool touching = !state.contact_index.empty();
+  const bool computed_touching = newest.active_count > 0;
+  if (touching == computed_touching) {
+    if (touching) m.stiffness = newest.stiffness;
+    m.valid_radius = std::max(0.0, newest.valid_radius - moved);
+  }
+  return m;
+}
+
+Mat3 passive_stiffness(const Mat3& K) {
+  const Mat3 symmetric = 0.5 * (K + K.transpose());
+  const Eigen::SelfAdjointEigenSolver<Mat3> eigen(symmetric);
+  const Vec3 clipped = eigen.eigenvalues().cwiseMin(0.0);
+  return eigen.eigenvectors() * clipped.asDiagonal() * eigen.eigenvectors().transpose();
+}
+
 LocalModel render_model(const LocalModel& contact, bool position_mode, const Vec3& target,
                         const Vec3& render_force, const CouplingOptions& coupling) {
-  if (!position_mode) return contact;
   LocalModel r = contact;
+  r.stiffness = passive_stiffness(contact.stiffness);
+  if (!position_mode) return r;
   r.origin = target;
   r.force = render_force;
   const double k = coupling.stiffness;
-  // (P.1); k I - K_c is positive definite for k > 0 and K_c negative semi-definite.
-  const Mat3 series = (k * Mat3::Identity() - contact.stiffness).inverse();
-  r.stiffness = k > 0.0 ? Mat3(k * series * contact.stiffness) : Mat3::Zero();
+  // (P.1) with the passive contact stiffness: k I - K_c is then positive definite.
+  const Mat3 series = (k * Mat3::Identity() - r.stiffness).inverse();
+  r.stiffness = k > 0.0 ? passive_stiffness(k * series * r.stiffness) : Mat3::Zero();
   return r;
 }
 

@@ -343,6 +343,7 @@ class SessionImpl final : public wire::Session::Server {
     s.setFramesCoalesced(c.frames_coalesced);
     s.setRealtimePriority(c.realtime_priority);
     s.setSpinMarginUs(sim_->config().spin_margin_us);
+    s.setStiffnessEvaluations(c.stiffness_evaluations);
     auto subs = s.initSubscribers(static_cast<unsigned>(subscribers_.size()));
     unsigned k = 0;
     for (const auto& sub : subscribers_) {

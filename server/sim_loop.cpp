@@ -153,6 +153,7 @@ SimCounters Simulation::counters() const {
   c.frames_coalesced = frames_coalesced_.load(std::memory_order_relaxed);
   c.blow_ups = blow_ups_.load(std::memory_order_relaxed);
   c.realtime_priority = realtime_priority_.load(std::memory_order_relaxed);
+  c.stiffness_evaluations = stiffness_evaluations_.load(std::memory_order_relaxed);
   c.step_us = step_us_.summary();
   c.lateness_us = lateness_us_.summary();
   return c;
@@ -195,6 +196,7 @@ void Simulation::prepare_and_build() {
   initial_coupling_ = coupling_;
   state_ = std::make_unique<State>(make_state(*model_, options_));
   divergence_bound_ = divergence_bound(*model_);
+  if (config_.contact_stiffness) stiffness_ = std::make_unique<StiffnessSource>(*model_, !config_.headless);
   rest_ = std::make_unique<Checkpoint>(*state_);
   checkpoint_ = std::make_unique<Checkpoint>(*state_);
   SnapshotBuffer frames([n = model_->particle_count](Snapshot& s) { s.reserve(n); });
@@ -318,6 +320,7 @@ bool Simulation::tick_once() {
         state.tick = 0;
         state.force_command = press_down(model.initial_force_command);
         set_position_mode(false);
+        if (stiffness_) stiffness_->invalidate();
         ticks_since_recovery_ = -1;
         break;
       }
@@ -384,6 +387,7 @@ void Simulation::recover(const std::string& what) {
     how = "restored the last checkpoint (every " + std::to_string(config_.checkpoint_interval) + " ticks)";
   }
   ticks_since_recovery_ = 0;
+  if (stiffness_) stiffness_->invalidate();
   const std::string message = what + ": " + how;
   {
     std::lock_guard<std::mutex> lock(text_mutex_);
@@ -397,18 +401,23 @@ void Simulation::recover(const std::string& what) {
 // tool's centre, and the rendered force as a function of the device position.
 void Simulation::fill_local_models(Snapshot& s) const {
   const State& state = *state_;
-  LocalModel& contact = s.contact_model;
-  contact.origin = state.indenter_center;
-  contact.force = state.indenter_contact_force;
-  contact.stiffness.setZero();
-  contact.valid_radius = 0.0;
-  contact.stiffness_tick = -1;
-  s.render_model = render_model(contact, position_mode_, state.tool_target, s.render_force, options_.coupling);
+  static const LocalContactModel none = [] {
+    LocalContactModel m;
+    m.tick = -1;
+    return m;
+  }();
+  s.contact_model = contact_model_now(state, stiffness_ ? stiffness_->newest() : none);
+  s.render_model =
+      render_model(s.contact_model, position_mode_, state.tool_target, s.render_force, options_.coupling);
 }
 
 void Simulation::publish() {
   const Model& model = *model_;
   const State& state = *state_;
+  if (stiffness_) {
+    stiffness_->offer(state);
+    stiffness_evaluations_.store(stiffness_->evaluations(), std::memory_order_relaxed);
+  }
   Snapshot& s = frames_writer_.back();
   s.tick = state.tick;
   s.sim_time = state.time;

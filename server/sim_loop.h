@@ -62,6 +62,9 @@ struct SimConfig {
   int checkpoint_interval = 100;  // ticks between checkpoints of the last good state
   DeviceLimits device;            // OpenRequest.device
   CouplingOptions coupling;       // OpenRequest.coupling; stiffness 0 = default_coupling()
+  // Compute the contact stiffness of the frames' local models (StiffnessSource): on a
+  // worker thread in real time, at each publish when headless. Off: stiffness zero.
+  bool contact_stiffness = true;
   // TEST HOOK (tests/server_simulation_test.cpp only; empty in the server): called on
   // the session's thread with the state just before each step, e.g. to inject a NaN.
   std::function<void(State&)> before_step_for_tests;
@@ -86,6 +89,7 @@ struct SimCounters {
   uint64_t deadline_misses = 0, skipped_ticks = 0, frames_published = 0, frames_coalesced = 0;
   uint32_t blow_ups = 0;
   bool realtime_priority = false;
+  uint64_t stiffness_evaluations = 0;
   Histogram::Summary step_us, lateness_us;
 };
 
@@ -188,6 +192,7 @@ class Simulation {
   Options options_;  // the scene's (options_of) and the coupling of the mode; the loop steps with them
   bool position_mode_ = false;  // options_.coupling is on (set_position) or off (set_force)
   CouplingOptions coupling_;    // the session's coupling, used in position mode
+  std::unique_ptr<StiffnessSource> stiffness_;  // null when config_.contact_stiffness is false
   std::unique_ptr<State> state_;
   double divergence_bound_ = 0.0;  // m, see diverged() in sim_loop.cpp
   std::unique_ptr<Checkpoint> rest_, checkpoint_;
@@ -224,6 +229,7 @@ class Simulation {
   std::atomic<uint64_t> deadline_misses_{0}, skipped_ticks_{0}, frames_published_{0}, frames_coalesced_{0};
   std::atomic<uint32_t> blow_ups_{0};
   std::atomic<bool> realtime_priority_{false};
+  std::atomic<uint64_t> stiffness_evaluations_{0};  // copied from stiffness_ at each publish
   std::atomic<bool> paused_flag_{false};
   std::atomic<int64_t> status_tick_{0};
   std::atomic<double> status_time_{0.0}, status_force_{0.0};

@@ -4,6 +4,7 @@
 // law and a lateral spring), at rest where k (x_d - c) + F_c(c) = 0.
 #include <cmath>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <gtest/gtest.h>
 
@@ -17,19 +18,24 @@ using palpate::Vec3;
 using palpate::server::LocalModel;
 using palpate::server::render_model;
 
-// A contact force on the tool at c: the surface z = 0 pushes up with a^1.5 (Hertz:
-// F ~ d^(3/2)) and pulls x toward 0 with a lateral stiffness growing with the depth.
+// A contact force on the tool at c, conservative like the elastic contact (F = -dPi/dc,
+// so K is symmetric; docs/physics.md (2.13)): the surface z = 0 pushes up with d^1.5
+// (Hertz: F ~ d^(3/2), d = -c_z) and holds x, y with a stiffness growing with the depth,
+//   Pi = 400 d^2.5 + 20 d x^2 + 7.5 d y^2   (convex where the tool presses: K negative definite).
 Vec3 contact_force(const Vec3& c) {
   const double d = std::max(0.0, -c[2]);
-  return Vec3(-40.0 * d * c[0], -15.0 * d * c[1], 1e3 * std::pow(d, 1.5));
+  const double touching = d > 0.0 ? 1.0 : 0.0;
+  return Vec3(-40.0 * d * c[0], -15.0 * d * c[1],
+              1e3 * std::pow(d, 1.5) + touching * (20.0 * c[0] * c[0] + 7.5 * c[1] * c[1]));
 }
-Mat3 contact_stiffness(const Vec3& c) {  // dF/dc, by hand
+Mat3 contact_stiffness(const Vec3& c) {  // dF/dc = -Hessian(Pi), by hand
   const double d = std::max(0.0, -c[2]);
   Mat3 K = Mat3::Zero();
+  if (d == 0.0) return K;
   K(0, 0) = -40.0 * d;
-  K(0, 2) = 40.0 * c[0];
+  K(0, 2) = K(2, 0) = 40.0 * c[0];
   K(1, 1) = -15.0 * d;
-  K(1, 2) = 15.0 * c[1];
+  K(1, 2) = K(2, 1) = 15.0 * c[1];
   K(2, 2) = -1.5e3 * std::sqrt(d);
   return K;
 }
@@ -74,6 +80,28 @@ TEST(LocalModel, RenderStiffnessIsTheCouplingAndTheContactInSeries) {
   const double e1 = (predicted - rendered(xd + dx, k)).norm();
   const double e2 = (predicted_half - rendered(xd + dx / 2, k)).norm();
   EXPECT_NEAR(e1 / e2, 4.0, 0.5);
+}
+
+TEST(LocalModel, TheRenderedStiffnessIsPassive) {
+  // A contact stiffness with a positive eigenvalue along x (a sphere pushed sideways
+  // off a particle) and a small asymmetry.
+  Mat3 K;
+  K << 50.0, 1.0, 0.0,  //
+      0.0, -200.0, 0.0,  //
+      0.0, 0.0, -3000.0;
+  const Mat3 P = palpate::server::passive_stiffness(K);
+  EXPECT_TRUE(P.isApprox(P.transpose(), 1e-14));
+  const Eigen::SelfAdjointEigenSolver<Mat3> eigen(P);
+  EXPECT_LE(eigen.eigenvalues().maxCoeff(), 1e-9);
+  EXPECT_NEAR(P(2, 2), -3000.0, 1e-9);  // the restoring directions are kept
+  EXPECT_NEAR(P(1, 1), -200.0, 0.01);
+  // A passive K is left as it is.
+  const Mat3 N = -Mat3::Identity() * 7.0;
+  EXPECT_TRUE(palpate::server::passive_stiffness(N).isApprox(N, 1e-14));
+  LocalModel contact;
+  contact.stiffness = K;
+  const LocalModel r = render_model(contact, false, Vec3::Zero(), Vec3::Zero(), CouplingOptions{});
+  EXPECT_TRUE(r.stiffness.isApprox(P, 1e-12));
 }
 
 TEST(LocalModel, ForceModeRendersTheContactModelItself) {

@@ -881,6 +881,37 @@ TEST(ServerE2E, PositionCommandsDriveTheToolThroughTheCoupling) {
   EXPECT_LT(held.getIndenterPosition().getZ(), info.getTouchHeight());
   EXPECT_GT(held.getIndenterPosition().getZ(), top);
 
+  // The local models of that frame: a contact stiffness of the frame's own state
+  // (headless: computed at the publish), restoring along z; the render model predicts
+  // the rendered force at a nearby device position, against the full steps to rest there.
+  auto contact_model = held.getContactModel();
+  EXPECT_EQ(contact_model.getStiffnessTick(), held.getTick());
+  EXPECT_LT(contact_model.getStiffness()[8], 0.0);  // dFz/dz
+  EXPECT_GT(contact_model.getValidRadius(), 0.0);
+  auto render = held.getRenderModel();
+  const double k = info.getCoupling().getStiffness();
+  const double kzz = render.getStiffness()[8];
+  EXPECT_LT(kzz, 0.0);
+  EXPECT_GT(kzz, -k);  // in series with the coupling: softer than the spring alone
+  const double dz = -0.02 * R;
+  const double predicted = render.getForce().getZ() + kzz * dz;
+  const double f0 = render.getForce().getZ();
+  auto deeper = session.setPositionRequest();
+  deeper.initPosition().setX(ax);
+  deeper.getPosition().setY(ay);
+  deeper.getPosition().setZ(info.getTouchHeight() - 0.1 * R + dz);
+  deeper.send().wait(c.ws());
+  kj::Own<capnp::Response<Session::StepResults>> keep_deeper;
+  const double full = step_frame(c, session, 6000, keep_deeper).getRenderForce().getZ();
+  EXPECT_LT(std::abs(predicted - full), 0.2 * std::abs(full - f0))
+      << "render model " << predicted << " N, full steps " << full << " N, zero-order hold " << f0 << " N";
+  auto back = session.setPositionRequest();
+  back.initPosition().setX(ax);
+  back.getPosition().setY(ay);
+  back.getPosition().setZ(info.getTouchHeight() - 0.1 * R);
+  back.send().wait(c.ws());
+  held = step_frame(c, session, 6000, keep);
+
   // Refused commands name the field and change nothing.
   const double wx = info.getWorkspaceMax().getX();
   for (auto bad : std::vector<std::array<double, 3>>{{std::nan(""), 0, 0}, {wx + 0.01, 0, az}, {0, 0, HUGE_VAL}}) {
