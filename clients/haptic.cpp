@@ -117,11 +117,11 @@ const char* motion_name(Motion m) {
 }
 
 PalpationPath::PalpationPath(const Geometry& g, const V3& start, double duration, double depth)
-    : duration_(duration), depth_(depth > 0 ? depth : g.radius / 5.0) {
+    : duration_(duration), depth_(depth == 0 ? g.radius / 5.0 : depth) {
   if (!(duration > 0) || !std::isfinite(duration))
     throw std::invalid_argument("palpation path: duration: must be a positive number of seconds");
   if (!std::isfinite(depth) || !(depth_ > 0))
-    throw std::invalid_argument("palpation path: depth: must be a finite positive depth in m (or 0 for R/5)");
+    throw std::invalid_argument("palpation path: depth: must be a positive number of m (or 0 for R/5), got " + std::to_string(depth));
   for (int i = 0; i < 3; ++i)
     if (!(g.workspace_min[i] <= g.workspace_max[i]) || !(g.box_min[i] <= g.box_max[i]))
       throw std::invalid_argument("palpation path: the workspace and the body's box must be non-empty boxes");

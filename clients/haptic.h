@@ -68,7 +68,7 @@ class PalpationPath {
   };
 
   // From `start` (the tool's position when the path begins) to above site A, press to
-  // `depth` below first touch (SessionInfo.touchHeight; depth <= 0: R/5), hold, slide at
+  // `depth` below first touch (SessionInfo.touchHeight; depth 0: R/5), hold, slide at
   // depth to site B, lift to `depth` above first touch, move in the air to site C, press,
   // hold, lift. Sites on the top face of the body's box (w = its width in x, h in y):
   // A = centre - w/4 x, B = centre + w/4 x, C = centre + h/4 y. Every point is clamped
