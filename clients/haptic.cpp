@@ -215,8 +215,10 @@ void LatencyTracker::on_reply(uint64_t seq) {
   if (first_unnamed_ >= sends_.size()) throw std::logic_error("LatencyTracker: a reply without a send");
   Send& s = sends_[first_unnamed_++];
   s.seq = seq;
-  for (const Seen& e : seen_)  // a frame that came before the reply
-    if (e.command_seq >= seq && e.t >= s.t) {
+  // A frame that came before the reply. (Every frame in seen_ that reflects seq came after
+  // this send: the server assigns seq when the command arrives.)
+  for (const Seen& e : seen_)
+    if (e.command_seq >= seq) {
       s.latency = e.t - s.t;
       s.resolved = true;
       break;

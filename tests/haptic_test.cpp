@@ -196,7 +196,7 @@ TEST(LatencyTracker, PairsSeqsWithTheFirstFrameReflectingThem) {
   EXPECT_THROW(l.on_reply(10), std::logic_error);  // a reply without a send
 }
 
-TEST(LatencyTracker, AFrameBeforeASendDoesNotCountForIt) {
+TEST(LatencyTracker, AnOlderCommandsFrameDoesNotResolveALaterSend) {
   LatencyTracker l;
   l.on_send(0.0);
   l.on_frame(3, 0.2);  // seq 3 (the reply below), seen before the second send
