@@ -1,5 +1,6 @@
 #include "analysis/reference.h"
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <cmath>
@@ -31,7 +32,83 @@ std::string vec_text(const Vec3& v) {
   return o.str();
 }
 
+std::string number_text(double v) {
+  std::ostringstream o;
+  o.precision(12);
+  o << v;
+  return o.str();
+}
+
+Eigen::Vector2d top_face_centre(const Scene& scene) {
+  return 0.5 * (scene.box.min.head<2>() + scene.box.max.head<2>());
+}
+
+bool at_top_face_centre(const Scene& scene, const Eigen::Vector2d& site) {
+  const double edge = (scene.box.max - scene.box.min).head<2>().maxCoeff();
+  return (site - top_face_centre(scene)).cwiseAbs().maxCoeff() <= 1e-9 * edge;
+}
+
 }  // namespace
+
+Eigen::Vector2d indenter_site(const Scene& scene) {
+  return scene.indenter.position_given ? Eigen::Vector2d(scene.indenter.position.head<2>()) : top_face_centre(scene);
+}
+
+void check_site(const Scene& scene, const std::string& field) {
+  const Eigen::Vector2d site = indenter_site(scene);
+  const double R = scene.indenter.radius;
+  const Vec3& lo = scene.box.min;
+  const Vec3& hi = scene.box.max;
+  const std::string where = "(" + number_text(site[0]) + ", " + number_text(site[1]) + ") m";
+  if (!site.allFinite() || site[0] < lo[0] || site[0] > hi[0] || site[1] < lo[1] || site[1] > hi[1])
+    throw std::invalid_argument(field + ": the site " + where + " is off the top face [" + number_text(lo[0]) + ", " +
+                                number_text(hi[0]) + "] x [" + number_text(lo[1]) + ", " + number_text(hi[1]) + "] m");
+  // Distance to the nearest side wall: the sphere's footprint (radius R) must lie on the face (4.2).
+  // The centre itself is always accepted: it is the Hertz experiment's own site, and a sphere
+  // wider than the face (the R = 5 m strain study of docs/verification.md) presses it.
+  const double wall = std::min({site[0] - lo[0], hi[0] - site[0], site[1] - lo[1], hi[1] - site[1]});
+  if (wall < R * (1.0 - 1e-12) && !at_top_face_centre(scene, site))
+    throw std::invalid_argument(field + ": the site " + where + " is " + number_text(wall) +
+                                " m from a side wall, closer than the indenter radius R = " + number_text(R) +
+                                " m: choose a site at least R from every side of the top face");
+}
+
+void place_indenter_at_site(Scene& scene, double x, double y, const std::string& field) {
+  scene.indenter.position_given = true;
+  scene.indenter.position = Vec3(x, y, scene.box.max[2] + scene.indenter.radius);
+  check_site(scene, field);
+  // Just touching: the height at which the sphere over (x, y) first meets a particle of the
+  // undeformed cloud (the cloud is built with the site, so a graded lattice is graded toward it).
+  const double first_contact = first_contact_height(make_node_cloud(scene).positions, scene.indenter.radius, x, y);
+  if (!std::isfinite(first_contact))
+    throw std::invalid_argument(field + ": no particle of the body lies under the indenter at the site");
+  scene.indenter.position[2] = first_contact;
+}
+
+double first_contact_height(const Points& X, double R, double x, double y) {
+  double first_contact = -INFINITY;
+  for (Eigen::Index i = 0; i < X.cols(); ++i) {
+    const double r2 = (X(0, i) - x) * (X(0, i) - x) + (X(1, i) - y) * (X(1, i) - y);
+    if (r2 < R * R) first_contact = std::max(first_contact, X(2, i) + std::sqrt(R * R - r2));
+  }
+  return first_contact;
+}
+
+double touch_height_at(const Model& model, double x, double y) {
+  const Points& X = model.rest_position;
+  const double R = model.indenter_radius;
+  double surface = -INFINITY;
+  for (Eigen::Index i = 0; i < X.cols(); ++i) {
+    const double r2 = (X(0, i) - x) * (X(0, i) - x) + (X(1, i) - y) * (X(1, i) - y);
+    if (r2 < R * R) surface = std::max(surface, X(2, i));
+  }
+  return surface + R;  // (4.1); -inf when nothing lies under the sphere
+}
+
+double indentation_at_tool(const Model& model, const State& state) {
+  const Vec3& c = state.indenter_center;
+  return touch_height_at(model, c[0], c[1]) - c[2];  // (4.1), (2.5) at the tool's (x, y)
+}
 
 std::string reference_key(const Scene& scene) {
   std::ostringstream o;
@@ -39,10 +116,11 @@ std::string reference_key(const Scene& scene) {
   o << "box=" << vec_text(scene.box.min) << vec_text(scene.box.max) << " E=" << scene.material.young_modulus
     << " nu=" << scene.material.poisson_ratio << " fixed=" << scene.fixed_faces << " R=" << scene.indenter.radius
     << " site=";
-  if (scene.indenter.position_given)
-    o << "[" << scene.indenter.position[0] << "," << scene.indenter.position[1] << "]";
-  else
+  const Eigen::Vector2d site = indenter_site(scene);
+  if (at_top_face_centre(scene, site))
     o << "centre";
+  else
+    o << "[" << site[0] << "," << site[1] << "]";
   return o.str();
 }
 
@@ -85,6 +163,10 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
     s.distribution.focus_given = false;
     s.distribution.first_spacing =
         family_first_spacing(height, options.base_per_edge, options.base_first_spacing, per_edge);
+    // The site: the lattice is graded toward it (focus_given false: graded_focus takes the
+    // indenter's (x, y)), so a node lies on it at every level, and the sphere starts just
+    // touching that node; only (x, y) of the scene's position is the site.
+    if (s.indenter.position_given) s.indenter.position[2] = s.box.max[2] + s.indenter.radius;
     s.material.law = MaterialLaw::stvk;       // the hex FEM has its own (linear) law
     s.integrator.allow_unstable_dt = true;    // a static solve: no time step to be stable
     const Model model = build_model(s);

@@ -22,9 +22,49 @@
 #include <string>
 #include <vector>
 
+#include "core/model.h"
 #include "core/scene.h"
+#include "core/state.h"
 
 namespace palpate {
+
+// ---------------------------------------------------------------------------
+// The site of an indentation (docs/physics.md §4, "Off-centre sites"): the point (x, y)
+// of the top face over which the tool presses. It is the scene's indenter.position
+// (x, y), or the centre of the top face when the scene gives none; palpate-verify and
+// palpate-reference --site X,Y set that same field (place_indenter_at_site), so the
+// model's start, the touch height, the static solve's candidates, the reference's
+// lattice focus and its key all follow one value.
+
+// The site of a scene: indenter.position's (x, y), else the centre of the box's top face.
+Eigen::Vector2d indenter_site(const Scene& scene);
+
+// Refuses (std::invalid_argument, "FIELD: ...") a site off the top face, or closer to a
+// side wall than the indenter radius R, (4.2) (the footprint within which the touch height is
+// taken, docs/physics.md (2.5), must lie on the face). `field` names where the site came
+// from (--site, or /indenter/position). The centre of the top face is always accepted (a
+// sphere wider than the face presses it, as the R = 5 m strain study does).
+void check_site(const Scene& scene, const std::string& field);
+
+// Places the indenter over (x, y), at rest just touching the undeformed body (the
+// highest point of the scene's own cloud under the sphere, as build_model places a
+// centred indenter), after check_site. A graded lattice without its own focus is
+// graded toward the site (core/node_cloud.h, graded_focus).
+void place_indenter_at_site(Scene& scene, double x, double y, const std::string& field = "--site");
+
+// The height of the centre of a sphere of radius R over (x, y) when it first touches one
+// of the points X (3 x n); -inf when none lies within R horizontally.
+double first_contact_height(const Points& X, double R, double x, double y);
+
+// The touch height z_touch of (2.5) over (x, y), (4.1): R + the height of the highest particle
+// of the reference configuration within horizontal distance R. Computed from the body,
+// so a face that is not flat or a cloud without a node under the site is measured as is.
+double touch_height_at(const Model& model, double x, double y);
+
+// The indentation under the tool's actual (x, y) (docs/physics.md (2.5)):
+// d = touch_height_at(c_x, c_y) - c_z. Equals core's indentation() while the tool is at
+// its start's (x, y) (a vertical guide); a free tool (the sliding study) needs this one.
+double indentation_at_tool(const Model& model, const State& state);
 
 struct ReferenceOptions {
   std::vector<int> levels{17, 25, 33, 41};  // nodes per edge, coarse to fine (at least 3)
@@ -50,10 +90,13 @@ struct Reference {
 };
 
 // The scene fields the reference depends on, as one line (box, material, fixed faces,
-// indenter radius and site); two scenes with the same key share a reference.
+// indenter radius and site); two scenes with the same key share a reference. The site is
+// "centre" for the centre of the top face (given or not), else "[x,y]".
 std::string reference_key(const Scene& scene);
 
-// Computes the reference at `forces`. `progress(message)` (optional) reports each level.
+// Computes the reference at `forces` for the scene's site (indenter_site): every level's
+// lattice is graded toward the site, with a node on it, and its contact candidates are
+// the top-face nodes under the sphere there. `progress(message)` (optional) reports each level.
 Reference finite_cube_reference(const Scene& scene, const std::vector<double>& forces,
                                 const ReferenceOptions& options = {},
                                 const std::function<void(const std::string&)>& progress = {});

@@ -25,6 +25,9 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
   --levels N1,N2,...    nodes per edge of the graded lattices, coarse to fine
                         (default 17,25,33,41; at least three)
   --first-spacing S     first spacing (m) of the 21-per-edge member of the family (default 0.025)
+  --site X,Y            the site (m) on the top face (default: the scene's indenter.position
+                        (x, y), else the centre); every level is graded toward it and
+                        the key names it; refused off the face or closer than R to a wall
   --set KEY=VALUE       override a scene field (repeatable)
   --out FILE            write the reference as JSON (what palpate-verify --reference reads)
   --json                print the reference as JSON on stdout
@@ -39,6 +42,7 @@ int main(int argc, char** argv) {
   std::vector<double> forces;
   ReferenceOptions options;
   bool json = false, quiet = false;
+  std::vector<double> site;
   try {
     for (cli::Arguments args(argc, argv); args.next();) {
       const std::string& arg = args.flag();
@@ -49,6 +53,10 @@ int main(int argc, char** argv) {
       else if (arg == "--first-spacing") options.base_first_spacing = cli::positive_list(value(), "--first-spacing").at(0);
       else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
       else if (arg == "--out") out_file = value();
+      else if (arg == "--site") {
+        site = cli::number_list(value(), "--site");
+        if (site.size() != 2) throw std::invalid_argument("--site: expected X,Y (two numbers, m)");
+      }
       else if (arg == "--json") json = true;
       else if (arg == "--quiet") quiet = true;
       else if (arg == "--help" || arg == "-h") {
@@ -67,7 +75,11 @@ int main(int argc, char** argv) {
 
   Reference ref;
   try {
-    const Scene scene = load_scene(scene_file, overrides);
+    Scene scene = load_scene(scene_file, overrides);
+    if (!site.empty())
+      place_indenter_at_site(scene, site[0], site[1], "--site");
+    else
+      check_site(scene, scene_file + ": /indenter/position");
     const double R = scene.indenter.radius;
     const double E_star = hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio);
     if (forces.empty()) forces = scene.verify.forces;

@@ -47,6 +47,10 @@ compares the indentation d with Hertz theory.
   --quiet             no progress on stderr
   --trace SECONDS     print the state every SECONDS of simulated time (stderr)
   --log-level LEVEL   spdlog level (default: warn)
+  --site X,Y          indent at (X, Y) on the top face (m) instead of its centre: sets
+                      indenter.position to (X, Y) just touching the body (a scene may
+                      give the site itself in indenter.position); refused off the top
+                      face or closer than R to a side wall
   --solve MODE        dynamic (default): step the scene's integrator until rest;
                       static: the quasi-static solve (exact for the linear hex FEM,
                       pseudo-transient continuation for the nonlinear models)
@@ -54,8 +58,10 @@ compares the indentation d with Hertz theory.
                       also measured against: auto (default; a stored reference with the
                       scene's key in the scene folder's references/), FILE, compute
                       (compute it now: minutes), or none
+The tool is held on the vertical guide (the Hertz experiment; a scene's "free" guide
+is overridden), so it stays over the site.
 Indentation d: travel of the indenter below the height at which it touches the
-undeformed surface (the highest particle under it); with the sphere centred
+undeformed surface (the highest particle under the tool's (x, y)); with the sphere centred
 between lattice particles d includes the strain-free sinking between them. Errors: (d_sim - d_ref) / d_ref; the L2 error
 is ||d_sim - d_ref|| / ||d_ref|| over the sweep.
 )";
@@ -63,6 +69,7 @@ is ||d_sim - d_ref|| / ||d_ref|| over the sweep.
 struct Row {
   double force = 0, d_sim = NAN, d_hertz = 0, d_layer = 0, d_ref = NAN, d_ref_uncertainty = NAN;
   double contact_force = 0;
+  double tool_x = NAN, tool_y = NAN;  // the tool's (x, y) at rest, m (the site)
   long steps = 0;
   double sim_time = 0, wall_seconds = 0;
   bool at_rest = false;
@@ -89,6 +96,7 @@ int main(int argc, char** argv) {
   bool json = false, quiet = false, static_solve = false;
   std::string reference_choice = "auto";
   double trace_interval = 0;
+  std::optional<std::vector<double>> site;  // --site X,Y
   try {
     for (cli::Arguments args(argc, argv); args.next();) {
       const std::string& arg = args.flag();
@@ -108,6 +116,10 @@ int main(int argc, char** argv) {
           throw std::invalid_argument("--solve: expected dynamic or static, got '" + mode + "'");
         static_solve = mode == "static";
       } else if (arg == "--reference") reference_choice = value();
+      else if (arg == "--site") {
+        site = cli::number_list(value(), "--site");
+        if (site->size() != 2) throw std::invalid_argument("--site: expected X,Y (two numbers, m)");
+      }
       else if (arg == "--help" || arg == "-h") {
         std::cout << kUsage;
         return 0;
@@ -120,10 +132,29 @@ int main(int argc, char** argv) {
   }
   spdlog::set_level(spdlog::level::from_str(log_level));
 
-  std::optional<tools::LoadedScene> loaded = tools::load_scene_and_model("palpate-verify", scene_file, overrides);
-  if (!loaded) return 1;
+  // The scene, at its site: --site sets indenter.position (analysis/reference.h), a scene
+  // may give it; either way it is checked before the model is built.
+  std::optional<tools::LoadedScene> loaded;
+  try {
+    Scene scene = load_scene(scene_file, overrides);
+    if (site)
+      place_indenter_at_site(scene, (*site)[0], (*site)[1], "--site");
+    else
+      check_site(scene, scene_file + ": /indenter/position");
+    Model model = build_model(scene);
+    Options opt = options_of(scene);
+    if (opt.tool_guide != ToolGuide::vertical && !quiet)
+      std::fprintf(stderr, "palpate-verify: indenter.guide is free in the scene; the sweep holds the tool on the "
+                           "vertical guide\n");
+    opt.tool_guide = ToolGuide::vertical;  // the Hertz experiment: the guide holds (x, y) at the site
+    loaded = tools::LoadedScene{std::move(scene), std::move(model), opt};
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-verify: " << e.what() << "\n";
+    return 1;
+  }
   const Scene& scene = loaded->scene;
   const Model& model = loaded->model;
+  const double site_x = model.indenter_start[0], site_y = model.indenter_start[1];
 
   const MaterialSpec& mat = scene.material;
   const double R = model.indenter_radius;
@@ -137,12 +168,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "palpate-verify: %s (%s), %d particles (%d fixed, %d regularised, worst cond(A) %.3g), spacing "
                  "%.4g ... %.4g m, sum of volumes %.4g m^3 (box %.4g), integration residual %.2g (nodal %.2g), "
-                 "%s dt = %g s, damping %g 1/s\n",
+                 "%s dt = %g s, damping %g 1/s, site (%g, %g) m\n",
                  scene.name.c_str(), scene.model.c_str(), model.particle_count, model.fixed_count,
                  model.regularized_count, model.worst_condition, model.min_spacing, model.max_spacing,
                  model.total_volume, model.box_volume, model.integration_residual,
                  model.integration_residual_nodal, to_string(scene.integrator.type), scene.integrator.dt,
-                 scene.integrator.damping);
+                 scene.integrator.damping, site_x, site_y);
   if (!quiet && model.mesh_tetrahedra > 0)
     std::fprintf(stderr, "palpate-verify: mesh of %lld tetrahedra (%lld unused nodes dropped)\n",
                  static_cast<long long>(model.mesh_tetrahedra), static_cast<long long>(model.mesh_unused_nodes));
@@ -208,7 +239,7 @@ int main(int argc, char** argv) {
     const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, row.force, [&](const State& s) {
       if (trace_every > 0 && s.tick % trace_every == 0)
         std::fprintf(stderr, "    t = %8.3f s  d = %.6f m  contact %9.4f N (%zu particles)  v_ind = %+.2e  max v = %.2e m/s\n",
-                     s.time, indentation(model, s), s.indenter_contact_force[2], s.contact_index.size(),
+                     s.time, indentation_at_tool(model, s), s.indenter_contact_force[2], s.contact_index.size(),
                      s.indenter_velocity[2], max_particle_speed(s));
     });
     row.steps = press.steps;
@@ -224,7 +255,10 @@ int main(int argc, char** argv) {
     if (row.status == "diverged") {
       state = make_state(model, opt);  // start the next force from the rest state
     } else {
-      row.d_sim = indentation(model, state);
+      // (2.5) under the tool's actual (x, y); the guide keeps it at the site.
+      row.d_sim = indentation_at_tool(model, state);
+      row.tool_x = state.indenter_center[0];
+      row.tool_y = state.indenter_center[1];
       row.contact_force = state.indenter_contact_force[2];
       if (!row.at_rest) row.status = "not at rest";
     }
@@ -243,11 +277,12 @@ int main(int argc, char** argv) {
 
   if (!csv_file.empty()) {
     std::ofstream csv(csv_file);
-    csv << "force_N,d_sim_m,d_hertz_m,d_layer_m,err_hertz,err_layer,contact_force_N,steps,sim_time_s,wall_s,status\n";
+    csv << "site_x_m,site_y_m,force_N,d_sim_m,d_hertz_m,d_layer_m,d_ref_m,err_hertz,err_layer,err_ref,tool_x_m,tool_y_m,"
+           "contact_force_N,steps,sim_time_s,wall_s,status\n";
     for (const Row& r : rows)
-      csv << r.force << ',' << r.d_sim << ',' << r.d_hertz << ',' << r.d_layer << ','
+      csv << site_x << ',' << site_y << ',' << r.force << ',' << r.d_sim << ',' << r.d_hertz << ',' << r.d_layer << ',' << r.d_ref << ','
           << (r.d_sim - r.d_hertz) / r.d_hertz << ',' << (r.d_sim - r.d_layer) / r.d_layer << ','
-          << r.contact_force << ',' << r.steps << ',' << r.sim_time << ',' << r.wall_seconds << ',' << r.status
+          << (r.d_sim - r.d_ref) / r.d_ref << ',' << r.tool_x << ',' << r.tool_y << ',' << r.contact_force << ',' << r.steps << ',' << r.sim_time << ',' << r.wall_seconds << ',' << r.status
           << '\n';
   }
 
@@ -267,6 +302,7 @@ int main(int argc, char** argv) {
     out["law"] = scene.model == "hex_fem" ? to_string(scene.hex_fem.formulation) : to_string(scene.material.law);
     out["poisson_ratio"] = scene.material.poisson_ratio;
     out["indenter_radius"] = scene.indenter.radius;
+    out["site"] = {site_x, site_y};  // m, the (x, y) of the top face pressed
     out["total_volume"] = model.total_volume;
     out["box_volume"] = model.box_volume;
     out["mesh_tetrahedra"] = model.mesh_tetrahedra;
@@ -294,6 +330,7 @@ int main(int argc, char** argv) {
                       {"d_reference_uncertainty", num(r.d_ref_uncertainty)},
                       {"error_reference", num((r.d_sim - r.d_ref) / r.d_ref)},
                       {"contact_force", r.contact_force},
+                      {"tool_xy", {num(r.tool_x), num(r.tool_y)}},
                       {"steps", r.steps},
                       {"sim_time", r.sim_time},
                       {"wall_seconds", r.wall_seconds},
@@ -302,9 +339,9 @@ int main(int argc, char** argv) {
     out["rows"] = list;
     std::cout << out.dump(2) << "\n";
   } else {
-    std::printf("\nHertz indentation, scene %s: %d particles, k = %d, alpha = %g, %s dt = %g s\n", scene.name.c_str(),
-                model.particle_count, scene.mls.neighbors, scene.mls.support_factor, to_string(scene.integrator.type),
-                scene.integrator.dt);
+    std::printf("\nHertz indentation, scene %s: %d particles, k = %d, alpha = %g, %s dt = %g s, site (%g, %g) m\n",
+                scene.name.c_str(), model.particle_count, scene.mls.neighbors, scene.mls.support_factor,
+                to_string(scene.integrator.type), scene.integrator.dt, site_x, site_y);
     std::printf("%10s %10s %10s %10s %10s %9s %9s %9s %8s %9s  %s\n", "F [N]", "d_sim [m]", "d_Hertz", "d_layer",
                 "d_ref", "err_H", "err_layer", "err_ref", "steps", "wall [s]", "status");
     // A value that does not exist (no reference, or a force outside its range) prints "-", never "nan".

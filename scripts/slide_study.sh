@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The sliding study (docs/physics.md §4, "The sliding test"; tools/sliding.h): the tool,
+# free, pressed with a constant normal force and dragged across the middle of the top
+# face by the virtual coupling (a target moving at v along x, its z following the tool)
+# at speeds decades apart; palpate-slide prints |mean F_x| / |mean F_z| of the contact
+# force over the window x in [-0.1, 0.1] m and the depth at the middle against the static
+# indentation there. Then scripts/plot_slide.py draws the ratio and the depth error
+# against the speed (PNG).
+#
+# usage: scripts/slide_study.sh [--quick] [--out DIR]
+#   --quick    the coarse 8^3 scene of tests/sliding_test.cpp only (seconds)
+#   --out DIR  output folder (default docs/verification/sliding)
+# BUILD_DIR (default build) holds bin/palpate-slide; it is built there (Release) if missing.
+# The full study (the haptic scene and the paper's 18^3 scene, 1 m/s ... 1 mm/s at 82.88 N)
+# takes about five minutes on one core.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+quick=0
+out=docs/verification/sliding
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --quick) quick=1 ;;
+    --out) out=${2:?--out needs a folder}; shift ;;
+    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "slide_study.sh: unknown option '$1'" >&2; exit 2 ;;
+  esac
+  shift
+done
+
+BUILD_DIR=${BUILD_DIR:-build}
+slide="$BUILD_DIR/bin/palpate-slide"
+if [[ ! -x "$slide" ]]; then
+  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
+  cmake --build "$BUILD_DIR" -j2 --target palpate-slide
+fi
+mkdir -p "$out"
+force=82.88
+speeds=1,0.1,0.01,0.001
+
+run() {  # name, then palpate-slide arguments
+  local name=$1; shift
+  echo "slide_study.sh: $name" >&2
+  "$slide" "$@" --force "$force" --speeds "$speeds" --json --csv "$out/$name.csv" > "$out/$name.json"
+}
+
+if [[ $quick == 1 ]]; then
+  run coarse_8 --scene scenes/hertz_cube.json --per-edge 8 --set integrator.type=symplectic_euler
+else
+  run haptic --scene scenes/hertz_cube_haptic.json
+  run uniform_18 --scene scenes/hertz_cube.json
+fi
+/usr/bin/python3 scripts/plot_slide.py "$out"
