@@ -405,6 +405,7 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   inbox->latency = &latency;
   inbox->errors = &errors;
   inbox->path = &path;
+  KJ_DEFER(inbox->active = false);  // the sink may outlive these (frames still on their way)
   const int64_t end = t0 + static_cast<int64_t>(std::llround(config.seconds * 1e9));
   int64_t next_command = t0, next_servo = t0, next_live = t0;
   for (;;) {
@@ -467,7 +468,7 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   KJ_IF_MAYBE(e, refusal) { kj::throwFatalException(kj::mv(*e)); }
   auto stats_response = session.statsRequest().send().wait(ws);
   auto stats = stats_response.getStats();
-  inbox->active = false;
+  inbox->active = false;  // before cancel(): its wait may deliver frames already sent
   subscription.cancelRequest().send().wait(ws);
 
   ServerStats& s = result.server;

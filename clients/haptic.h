@@ -144,7 +144,7 @@ class LatencyTracker {
 // The rendering error between full steps: at each frame j (in position mode, the tick
 // right after frame j-1), its renderForce F_j, the full step's force at the target x_j,
 // against (a) the local model of frame j-1 at x_j, render(model_{j-1}, x_j, max_force),
-// and (b) the zero-order hold F_{j-1}.
+// and (b) the zero-order hold F_{j-1}. Per segment: the path's segment when frame j arrived.
 class RenderingError {
  public:
   RenderingError(size_t segments, double max_force) : local_(segments + 1), hold_(segments + 1), max_force_(max_force) {}
