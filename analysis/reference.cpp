@@ -152,6 +152,8 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
   ref.forces = forces;
   ref.key = reference_key(scene);
   const double height = scene.box.max[2] - scene.box.min[2];
+  const double base_first_spacing =
+      options.base_first_spacing > 0 ? options.base_first_spacing : 0.05 * scene.indenter.radius;
   for (int per_edge : options.levels) {
     const auto start = std::chrono::steady_clock::now();
     Scene s = scene;
@@ -162,7 +164,7 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
     s.distribution.spacing = 0.0;
     s.distribution.focus_given = false;
     s.distribution.first_spacing =
-        family_first_spacing(height, options.base_per_edge, options.base_first_spacing, per_edge);
+        family_first_spacing(height, options.base_per_edge, base_first_spacing, per_edge);
     // The site: the lattice is graded toward it (focus_given false: graded_focus takes the
     // indenter's (x, y)), so a node lies on it at every level, and the sphere starts just
     // touching that node; only (x, y) of the scene's position is the site.

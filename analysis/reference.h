@@ -69,7 +69,9 @@ double indentation_at_tool(const Model& model, const State& state);
 struct ReferenceOptions {
   std::vector<int> levels{17, 25, 33, 41};  // nodes per edge, coarse to fine (at least 3)
   int base_per_edge = 21;                   // the lattice on which first_spacing is given
-  double base_first_spacing = 0.025;        // m, at base_per_edge (docs/physics.md §6, "Grading toward the contact fixes it cheaply")
+  // m, at base_per_edge (docs/physics.md §6, "Grading toward the contact fixes it cheaply");
+  // 0: 0.05 R, scaled with the indenter radius (0.025 m for the default R = 0.5 m)
+  double base_first_spacing = 0.0;
 };
 
 struct ReferenceLevel {

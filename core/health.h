@@ -9,9 +9,12 @@
 //  - energy_jump:       kinetic energy (body + indenter) above energy_factor x the energy budget
 //                       (initial energy + work of the command and of gravity, its running maximum;
 //                       the total energy can only be below it, with damping less) plus a floor
-//                       of 1/2 M_body (1 cm/s)^2;
+//                       of 1/2 M_body (c_p / 400)^2 (the free body at the particle speed of a
+//                       p-wave of strain 1/400: it scales with the scene);
 //  - indenter_speed:    |v_indenter| above max_indenter_speed (default: one minimum particle
-//                       spacing per step, beyond which contact can tunnel);
+//                       spacing per step, beyond which contact can tunnel) while the tool is
+//                       within two steps' travel of a particle (a tool in free flight, lifted
+//                       off the body, is not judged: the workspace box keeps it in reach);
 //  - penetration:       a contact candidate deeper inside the sphere than max_penetration (default:
 //                       the contact tolerance + 5 % of the minimum spacing) after the contact solve;
 //  - inverted_particle: det F_i <= 0 at an MLS particle (checked for n / inversion_sweep_ticks

@@ -5,6 +5,7 @@
 // error is thrown as a SceneError(source, pointer, reason).
 #include "core/scene.h"
 
+#include "core/hertz.h"
 #include "core/mesh_reader.h"
 #include "core/node_cloud.h"
 
@@ -568,7 +569,7 @@ void read_indenter(const Reader& r, IndenterSpec& ind) {
 
 void read_contact(const Reader& r, ContactSpec& c) {
   r.object(kContactKeys);
-  r["tolerance"].get(c.tolerance, open_closed(0.0, 1.0));
+  r["tolerance"].get(c.tolerance, closed(0.0, 1.0));
   r["max_iterations"].get(c.max_iterations, 1, 1000000);
 }
 
@@ -608,10 +609,21 @@ void read_verify(const Reader& r, VerifySpec& v) {
   }
   const Reader rest = r["rest"];
   rest.object(kRestKeys);
-  rest["velocity_tolerance"].get(v.rest.velocity_tolerance, positive());
+  rest["velocity_tolerance"].get(v.rest.velocity_tolerance, at_least(0.0));
   rest["force_tolerance"].get(v.rest.force_tolerance, positive());
   rest["window"].get(v.rest.window, positive());
   rest["max_time"].get(v.rest.max_time, open_closed(0.0, 1e6));
+}
+
+// The defaults that scale with the scene (a field left out or written as 0 / []): the
+// contact tolerance, the rest speed and the verification sweep, from the indenter radius R
+// (docs/scene-format.md writes the formulas).
+void derive_scale_defaults(Scene& s) {
+  const double R = s.indenter.radius;
+  if (s.contact.tolerance == 0.0) s.contact.tolerance = kContactToleranceOverRadius * R;
+  if (s.verify.rest.velocity_tolerance == 0.0)
+    s.verify.rest.velocity_tolerance = kRestTravelOverRadius * R / s.verify.rest.window;
+  if (s.verify.forces.empty()) s.verify.forces = default_verify_forces(s.material, R);
 }
 
 void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
@@ -634,11 +646,14 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   read_fixed(r["fixed"], s.fixed_faces);
   read_indenter(r["indenter"], s.indenter);
   if (s.distribution.type == DistributionType::graded_grid) check_graded_grid(r["body"]["distribution"], s);
+  s.contact.tolerance = 0.0;  // left out: derived (derive_scale_defaults)
   read_contact(r["contact"], s.contact);
   read_integrator(r["integrator"], s.integrator);
   read_gravity(r["gravity"], s.gravity);
+  s.verify.rest.velocity_tolerance = 0.0;  // left out: derived (derive_scale_defaults)
   read_verify(r["verify"], s.verify);
   read_health(r["health"], s.health);
+  derive_scale_defaults(s);
 }
 
 // ---------------------------------------------------------------------------
@@ -772,5 +787,17 @@ const char* to_string(HexVolumetricIntegration v) { return name_for(kHexVolumetr
 const char* to_string(SupportRule r) { return name_for(kSupportRules, r); }
 const char* to_string(IntegrationRule r) { return name_for(kIntegrationRules, r); }
 const char* to_string(VolumeRule r) { return name_for(kVolumeRules, r); }
+
+}  // namespace palpate
+
+namespace palpate {
+
+std::vector<double> default_verify_forces(const MaterialSpec& material, double radius) {
+  const double E_star = hertz::effective_modulus(material.young_modulus, material.poisson_ratio);
+  std::vector<double> forces;
+  const double lo = kVerifyDepthsOverRadius[0], hi = kVerifyDepthsOverRadius[1];
+  for (int k = 0; k < 10; ++k) forces.push_back(hertz::force((lo + (hi - lo) * k / 9.0) * radius, radius, E_star));
+  return forces;
+}
 
 }  // namespace palpate

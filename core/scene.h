@@ -122,8 +122,16 @@ struct IndenterSpec {
   ToolGuide guide = ToolGuide::vertical;
 };
 
+// Lengths and speeds that scale with the scene: the reader derives them from the
+// indenter radius R where a scene leaves them out or writes 0 (docs/scene-format.md).
+constexpr double kContactToleranceOverRadius = 2e-6;    // contact.tolerance = 2e-6 R
+constexpr double kRestTravelOverRadius = 1e-5;          // verify.rest: travel over the window <= 1e-5 R
+constexpr double kVerifyDepthsOverRadius[2] = {0.02, 0.2};  // verify.forces: Hertz loads for d/R = 0.02 ... 0.2
+
 struct ContactSpec {
-  double tolerance = 1e-6;   // m, allowed penetration after the contact solve
+  // m, allowed penetration after the contact solve; the reader's default (absent or 0) is
+  // kContactToleranceOverRadius x R (1e-6 m for the default R = 0.5 m)
+  double tolerance = 1e-6;
   int max_iterations = 200;  // pivoting steps of the active-set solve
 };
 
@@ -149,14 +157,17 @@ struct HealthSpec {
 
 // When a quasi-static run (palpate-verify) calls the state "at rest" (docs/physics.md §2).
 struct RestSpec {
-  double velocity_tolerance = 1e-4;  // m/s, max particle and indenter speed
+  // m/s, max mean particle and indenter speed over the window; the reader's default (absent
+  // or 0) is kRestTravelOverRadius x R / window (1e-4 m/s for R = 0.5 m, window 0.05 s)
+  double velocity_tolerance = 1e-4;
   double force_tolerance = 1e-3;     // relative |contact force - command| / command
   double window = 0.05;              // s the criteria must hold continuously
   double max_time = 60.0;            // s of simulated time before giving up
 };
 
 struct VerifySpec {
-  std::vector<double> forces;  // N, the force sweep; empty: Hertz depths 0.01 ... 0.1 m
+  // N, the force sweep; the reader's default (absent or empty) is default_verify_forces()
+  std::vector<double> forces;
   RestSpec rest;
 };
 
@@ -187,6 +198,11 @@ Scene load_scene(const std::filesystem::path& file, const SceneOverrides& overri
 // The same from text; base_dir resolves relative file names inside the scene.
 Scene parse_scene(const std::string& json_text, const std::string& source_name,
                   const std::filesystem::path& base_dir, const SceneOverrides& overrides = {});
+
+// The default force sweep: the Hertz loads (docs/physics.md (3.2)) of the depths
+// d = R x (0.02, 0.04, ..., 0.2) with the scene's material and radius (for the default
+// R = 0.5 m: d = 0.01 ... 0.1 m, the paper's sweep).
+std::vector<double> default_verify_forces(const MaterialSpec& material, double radius);
 
 // The JSON pointer of every field a scene file may set ("/body/distribution/per_edge"),
 // in the order the reader checks them (the order of docs/scene-format.md).

@@ -139,7 +139,7 @@ struct Indenter {
   guide @6 :ToolGuide = vertical;
 }
 struct Contact {
-  tolerance @0 :Float64 = 1e-6;                              # m, (0, 1]
+  tolerance @0 :Float64 = 0;                                 # m, [0, 1]; 0 = 2e-6 R
   maxIterations @1 :Int32 = 200 $Json.name("max_iterations"); # [1, 1e6]
 }
 struct Integrator {
@@ -158,13 +158,13 @@ struct Health {                  # per-step health checks (core/health.h, docs/s
   inversionSweepTicks @4 :Int32 = 64 $Json.name("inversion_sweep_ticks");   # [1, 1e6]
 }
 struct Rest {
-  velocityTolerance @0 :Float64 = 1e-4 $Json.name("velocity_tolerance"); # m/s, > 0
+  velocityTolerance @0 :Float64 = 0 $Json.name("velocity_tolerance");    # m/s, >= 0; 0 = 1e-5 R / window
   forceTolerance @1 :Float64 = 1e-3 $Json.name("force_tolerance");       # relative, > 0
   window @2 :Float64 = 0.05;                                             # s, > 0
   maxTime @3 :Float64 = 60 $Json.name("max_time");                        # s, (0, 1e6]
 }
 struct Verify {
-  forces @0 :List(Float64);  # N, each in (0, 1e9]; null or empty = Hertz loads for d = 0.01 ... 0.1 m
+  forces @0 :List(Float64);  # N, each in (0, 1e9]; null or empty = Hertz loads for d/R = 0.02 ... 0.2
   rest @1 :Rest;
 }
 struct Scene {

@@ -13,9 +13,21 @@
 #     --box XMIN YMIN ZMIN XMAX YMAX ZMAX   the box, m (default -1 -1 -2 1 1 0: the
 #                       2 m cube with its top face at z = 0)
 #     --focus X Y Z     the focus, m (default the centre of the top face, the indenter's site)
+#     --focus-top       grade from the whole top face instead: r is the depth below it
+#                       (a palpation block, fine wherever the tool may touch it)
+#     --top-size H2     with a focus point or a --patch: also at most H2 + (G - 1) x depth
+#                       below the top face, so the whole top face is at most H2 (the focus
+#                       stays finer)
+#     --patch A         with --focus-top: only the square |x - fx|, |y - fy| <= A of the top
+#                       face (fx, fy: the centre of the top face) is the focus; r is the
+#                       distance to it (the palpable part of the face, coarser toward walls)
 #     --seed N          gmsh's Mesh.RandomSeed (default 1); the mesh is deterministic
 #                       for a given gmsh version, seed and options
 #     --format F        msh41 (default) or msh22
+#
+# scenes/meshes/palpation_block.msh (the hand-scale block) is
+#   scripts/make_mesh.sh --box -0.05 -0.05 -0.05 0.05 0.05 0 --focus-size 0.001 --growth 1.2 \
+#     --top-size 0.0025 --far-size 0.015 --out scenes/meshes/palpation_block.msh
 #
 # gmsh is not needed by the build or the tests. If it is missing the script installs
 # Debian's package when run as root, else says how.
@@ -27,6 +39,9 @@ h1=0.25
 growth=1.25
 box=(-1 -1 -2 1 1 0)
 focus=()
+focus_top=0
+top_size=
+patch=
 seed=1
 format=msh41
 
@@ -45,9 +60,12 @@ while [ $# -gt 0 ]; do
     --focus) [ $# -ge 4 ] || die "--focus needs 3 numbers"
              for v in "${@:2:3}"; do number --focus "$v"; done
              focus=("${@:2:3}"); shift 4 ;;
+    --focus-top) focus_top=1; shift ;;
+    --top-size) number "$1" "${2:-}"; top_size=$2; shift 2 ;;
+    --patch) number "$1" "${2:-}"; patch=$2; shift 2 ;;
     --seed) [[ "${2:-}" =~ ^[0-9]+$ ]] || die "--seed: expected a non-negative integer"; seed=$2; shift 2 ;;
     --format) case "${2:-}" in msh41|msh22) format=$2 ;; *) die "--format: msh41 or msh22, got '${2:-}'" ;; esac; shift 2 ;;
-    -h|--help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (--help)" ;;
   esac
 done
@@ -56,6 +74,7 @@ awk -v h0="$h0" -v h1="$h1" -v g="$growth" 'BEGIN { exit !(h0 > 0 && h1 >= h0 &&
   die "need 0 < --focus-size <= --far-size and --growth > 1 (got $h0, $h1, $growth)"
 awk -v a="${box[0]}" -v b="${box[1]}" -v c="${box[2]}" -v d="${box[3]}" -v e="${box[4]}" -v f="${box[5]}" \
   'BEGIN { exit !(d > a && e > b && f > c) }' || die "--box: max must exceed min on every axis"
+[ $focus_top -eq 0 ] || [ ${#focus[@]} -eq 0 ] || die "--focus and --focus-top exclude each other"
 if [ ${#focus[@]} -eq 0 ]; then
   focus=($(awk -v a="${box[0]}" -v b="${box[1]}" -v d="${box[3]}" -v e="${box[4]}" -v f="${box[5]}" \
     'BEGIN { printf "%.17g %.17g %.17g", (a + d) / 2, (b + e) / 2, f }'))
@@ -70,6 +89,24 @@ if ! command -v gmsh >/dev/null; then
   fi
 fi
 
+[ -z "$patch" ] || [ $focus_top -eq 1 ] || die "--patch goes with --focus-top"
+if [ $focus_top -eq 1 ] && [ -n "$patch" ]; then
+  distance="Sqrt(Max(Fabs(x - (${focus[0]})) - $patch, 0)^2 + Max(Fabs(y - (${focus[1]})) - $patch, 0)^2 + ((${box[5]}) - z)^2)"
+  where="the top face within $patch m of (${focus[0]}, ${focus[1]})"
+elif [ $focus_top -eq 1 ]; then
+  distance="((${box[5]}) - z)"
+  where="the top face z = ${box[5]}"
+else
+  distance="Sqrt((x - (${focus[0]}))^2 + (y - (${focus[1]}))^2 + (z - (${focus[2]}))^2)"
+  where="(${focus[*]})"
+fi
+size="Min($h1, $h0 + ($growth - 1) * $distance)"
+if [ -n "$top_size" ]; then
+  [ $focus_top -eq 0 ] || [ -n "$patch" ] || die "--top-size goes with a focus point or a --patch"
+  size="Min($size, $top_size + ($growth - 1) * ((${box[5]}) - z))"
+  where="$where, at most $top_size m on the top face"
+fi
+
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 geo=$work/box.geo
@@ -77,9 +114,10 @@ cat > "$geo" <<EOF
 // Written by scripts/make_mesh.sh
 SetFactory("OpenCASCADE");
 Box(1) = {${box[0]}, ${box[1]}, ${box[2]}, ${box[3]} - (${box[0]}), ${box[4]} - (${box[1]}), ${box[5]} - (${box[2]})};
-// Element size: h(r) = min(H1, H0 + (G - 1) r), r the distance to the focus.
+// Element size: h(r) = min(H1, H0 + (G - 1) r), r the distance to the focus (or the depth
+// below the top face), with --top-size also at most H2 + (G - 1) x depth.
 Field[1] = MathEval;
-Field[1].F = "Min($h1, $h0 + ($growth - 1) * Sqrt((x - (${focus[0]}))^2 + (y - (${focus[1]}))^2 + (z - (${focus[2]}))^2))";
+Field[1].F = "$size";
 Background Field = 1;
 Mesh.MeshSizeExtendFromBoundary = 0;
 Mesh.MeshSizeFromPoints = 0;
@@ -97,4 +135,4 @@ gmsh -3 -nt 1 -format "$format" -o "$out" "$geo" > "$work/gmsh.log" 2>&1 || { ca
 grep -E "Warning|Error" "$work/gmsh.log" >&2 || true
 nodes=$(awk '/^\$Nodes/ { getline; print (NF == 4 ? $2 : $1); exit }' "$out")
 tets=$(grep -E "^Info *: .*tetrahedra" "$work/gmsh.log" | tail -1 | sed 's/^Info *: *//' || true)
-echo "make_mesh.sh: $out: $nodes nodes; focus size $h0 m at (${focus[*]}), far size $h1 m, growth $growth${tets:+; $tets}"
+echo "make_mesh.sh: $out: $nodes nodes; focus size $h0 m at $where, far size $h1 m, growth $growth${tets:+; $tets}"

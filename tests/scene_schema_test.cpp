@@ -196,7 +196,10 @@ const Field kFields[] = {
 // "no file", the top face under the indenter, the indenter just touching the body.
 const std::set<std::string> kDerivedDefaults = {"/name", "/body/distribution/focus", "/body/distribution/node_file",
                                                 "/body/distribution/file", "/indenter/position",
-                                                "/indenter/workspace_min", "/indenter/workspace_max"};
+                                                "/indenter/workspace_min", "/indenter/workspace_max",
+                                                // scale with the indenter radius (core/scene.h)
+                                                "/contact/tolerance", "/verify/forces",
+                                                "/verify/rest/velocity_tolerance"};
 
 // "pointer: expected vs actual" for every field where the scenes differ; empty when equal.
 std::string differences(const Scene& expected, const Scene& actual) {
@@ -563,6 +566,7 @@ TEST(SceneSchema, EmptyFileLeavesEveryStructDefault) {
   Scene defaults;
   defaults.name = "my_scene";  // the source's stem
   defaults.source = "some/dir/my_scene.json";
+  defaults.verify.forces = default_verify_forces(defaults.material, defaults.indenter.radius);  // derived from R
   expect_same(defaults, parse_scene("{}", "some/dir/my_scene.json", "some/dir"),
               "parse_scene(\"{}\") against core/scene.h's defaults:");
 }

@@ -94,11 +94,39 @@ TEST(Scene, EmptyObjectGivesAllDefaults) {
   EXPECT_EQ(s.integrator.cg_tolerance, d.integrator.cg_tolerance);
   EXPECT_EQ(s.integrator.cg_max_iterations, d.integrator.cg_max_iterations);
   EXPECT_EQ(s.gravity, Vec3::Zero());
-  EXPECT_TRUE(s.verify.forces.empty());
-  EXPECT_EQ(s.verify.rest.velocity_tolerance, d.verify.rest.velocity_tolerance);
+  // Derived from R = 0.5 m: the paper's sweep d = 0.01 ... 0.1 m and the former absolute values.
+  ASSERT_EQ(s.verify.forces.size(), 10u);
+  EXPECT_NEAR(s.verify.forces.front(), 10.36, 0.01);
+  EXPECT_NEAR(s.verify.forces.back(), 327.6, 0.1);
+  EXPECT_DOUBLE_EQ(s.verify.rest.velocity_tolerance, 1e-4);
+  EXPECT_DOUBLE_EQ(s.contact.tolerance, 1e-6);
   EXPECT_EQ(s.verify.rest.force_tolerance, d.verify.rest.force_tolerance);
   EXPECT_EQ(s.verify.rest.window, d.verify.rest.window);
   EXPECT_EQ(s.verify.rest.max_time, d.verify.rest.max_time);
+}
+
+// The defaults that scale with the scene follow the indenter radius (and the rest window);
+// a value the scene writes is kept, and 0 / [] asks for the derived one.
+TEST(Scene, ScaleDefaultsFollowTheIndenterRadius) {
+  const Scene s = parse_scene(R"({"indenter": {"radius": 0.01}, "material": {"young_modulus": 2e4},
+                                  "verify": {"rest": {"window": 0.1}}})", "hand", ".");
+  EXPECT_DOUBLE_EQ(s.contact.tolerance, 2e-8);
+  EXPECT_DOUBLE_EQ(s.verify.rest.velocity_tolerance, 1e-5 * 0.01 / 0.1);
+  ASSERT_EQ(s.verify.forces.size(), 10u);
+  const double E_star = 2e4 / (1 - 0.3 * 0.3);
+  // Hertz (docs/physics.md (3.2)) inverted: the sweep is d/R = 0.02 ... 0.2.
+  const auto depth_over_R = [&](double F) { return std::pow(3 * F / (4 * E_star * std::sqrt(0.01)), 2.0 / 3.0) / 0.01; };
+  EXPECT_NEAR(depth_over_R(s.verify.forces.front()), 0.02, 1e-12);
+  EXPECT_NEAR(depth_over_R(s.verify.forces.back()), 0.2, 1e-12);
+  const Scene given = parse_scene(R"({"indenter": {"radius": 0.01}, "contact": {"tolerance": 1e-5},
+                                      "verify": {"forces": [0.1], "rest": {"velocity_tolerance": 3e-3}}})", "hand", ".");
+  EXPECT_EQ(given.contact.tolerance, 1e-5);
+  EXPECT_EQ(given.verify.rest.velocity_tolerance, 3e-3);
+  EXPECT_EQ(given.verify.forces, std::vector<double>{0.1});
+  const Scene zeros = parse_scene(R"({"indenter": {"radius": 0.01}, "material": {"young_modulus": 2e4}, "contact": {"tolerance": 0},
+                                      "verify": {"forces": [], "rest": {"velocity_tolerance": 0}}})", "hand", ".");
+  EXPECT_DOUBLE_EQ(zeros.contact.tolerance, 2e-8);
+  EXPECT_EQ(zeros.verify.forces, s.verify.forces);
 }
 
 TEST(Scene, ShippedHertzCube) {
@@ -340,7 +368,7 @@ TEST(SceneErrors, OutOfRange) {
       {R"({"indenter": {"radius": 0}})", "/indenter/radius", "must be a number in (0, 1000], got 0"},
       {R"({"indenter": {"mass": 2e6}})", "/indenter/mass", "must be a number in (0, 1e6], got 2e6"},
       {R"({"indenter": {"force": -2e9}})", "/indenter/force", "must be a number in [-1e9, 1e9], got -2e9"},
-      {R"({"contact": {"tolerance": 2}})", "/contact/tolerance", "must be a number in (0, 1], got 2"},
+      {R"({"contact": {"tolerance": 2}})", "/contact/tolerance", "must be a number in [0, 1], got 2"},
       {R"({"contact": {"max_iterations": 0}})", "/contact/max_iterations",
        "must be an integer in [1, 1000000], got 0"},
       {R"({"integrator": {"dt": 0}})", "/integrator/dt", "must be a number in (0, 1], got 0"},
