@@ -517,7 +517,7 @@ std::string number(double x) {
 double percent(double x, double peak) { return peak > 0 ? 100.0 * x / peak : NAN; }
 
 void print_error_row(std::FILE* out, const char* name, const RenderingError::Report& e, double peak) {
-  std::fprintf(out, "  %-12s %6zu   %9.4f %9.4f %9.4f (%6.2f %%)   %9.4f %9.4f %9.4f (%6.2f %%)\n", name, e.local.count,
+  std::fprintf(out, "  %-12s %6zu   %9.3g %9.3g %9.3g (%6.2f %%)   %9.3g %9.3g %9.3g (%6.2f %%)\n", name, e.local.count,
                e.local.p50, e.local.p99, e.local.max, percent(e.local.p99, peak), e.hold.p50, e.hold.p99, e.hold.max,
                percent(e.hold.p99, peak));
 }
@@ -546,7 +546,7 @@ void print_report(std::FILE* out, const Result& r) {
                static_cast<unsigned long long>(s.frames_dropped), r.compared, r.gaps);
   std::fprintf(out, "servo loop        %zu ticks, %zu skipped, wake-up lateness p99 %.0f us%s\n", r.servo_ticks,
                r.servo_skipped, r.servo_wake_p99_us, r.client_fifo ? ", SCHED_FIFO" : "");
-  std::fprintf(out, "rendering error   |F_next - prediction|, N (peak |F| %.3f N): local model vs zero-order hold\n",
+  std::fprintf(out, "rendering error   |F_next - prediction|, N (peak |F| %.4g N): local model vs zero-order hold\n",
                r.peak_force);
   std::fprintf(out, "  %-12s %6s   %9s %9s %9s %10s   %9s %9s %9s %10s\n", "segment", "frames", "local p50", "p99",
                "max", "(p99/peak)", "hold p50", "p99", "max", "(p99/peak)");
