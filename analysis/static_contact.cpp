@@ -285,4 +285,89 @@ StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestS
   return out;
 }
 
+StaticSolution relax_to_rest_at(const Model& model, const Options& opt, State& state, const Vec3& tool_position,
+                                double residual_tolerance, double contact_tolerance, int max_steps) {
+  StaticSolution out;
+  if (!tool_position.allFinite()) {
+    out.message = "the tool position must be finite";
+    return out;
+  }
+  // Implicit Euler steps without damping (Newton steps regularised by M / dt^2, with the
+  // exact coupled contact solve), the tool so heavy that neither its free motion nor the
+  // contact projection moves it, and put back exactly after each step. A step whose
+  // residual grows is rejected and retried with half the step; an accepted one doubles it.
+  Options relax = opt;
+  relax.integrator.type = IntegratorType::implicit_euler;
+  relax.integrator.damping = 0.0;
+  relax.tool_guide = ToolGuide::free;
+  relax.coupling = CouplingOptions{};
+  relax.indenter_mass = 1e30;
+  relax.health.enabled = false;
+  relax.contact.tolerance = contact_tolerance;
+  relax.contact.max_iterations = std::max(relax.contact.max_iterations, 4 * model.particle_count);
+  relax.integrator.cg_tolerance = std::min(relax.integrator.cg_tolerance, 1e-10);
+  relax.integrator.cg_max_iterations = std::max(relax.integrator.cg_max_iterations, 4 * model.particle_count);
+  state.force_command.setZero();
+  double& dt = relax.integrator.dt;
+  const double dt_max = 1e4, dt_min = 1e-9;
+  Points f(3, model.particle_count);
+  auto hold = [&](State& s) {
+    s.indenter_center = tool_position;
+    s.indenter_velocity.setZero();
+    s.velocity.setZero();
+  };
+  auto residual_of = [&](const State& s) {  // the free particles' largest net force, N
+    elastic_forces(model, s.position, f);
+    add_contact_forces(s, f);
+    for (int i = 0; i < model.particle_count; ++i)
+      if (!model.fixed[i]) f.col(i) += model.mass[i] * opt.gravity;
+    double r = 0.0;
+    for (int i = 0; i < model.particle_count; ++i)
+      if (!model.fixed[i]) r = std::max(r, f.col(i).norm());
+    return r;
+  };
+  hold(state);
+  // The first step's contact solve finds the contact set at the held position; until it
+  // has run, the residual of the carried contact forces means nothing.
+  double residual = INFINITY;
+  int rejected_in_a_row = 0;
+  Checkpoint accepted(state);
+  // The tolerance is relative to the force on the tool (an absolute floor when there is none).
+  auto target = [&] { return residual_tolerance * std::max(state.indenter_contact_force.norm(), 1e-3); };
+  for (int k = 0; k < max_steps && residual > target(); ++k) {
+    accepted.save(state);
+    const StepStatus status = step(model, relax, state);
+    hold(state);
+    out.iterations = k + 1;
+    const double next = status == StepStatus::non_finite ? INFINITY : residual_of(state);
+    spdlog::debug("relax_to_rest_at: step {} dt {:.3g} s residual {:.3e} N contact ({:.4f}, {:.4f}, {:.4f}) N ({} nodes)",
+                  k, dt, next, state.indenter_contact_force[0], state.indenter_contact_force[1],
+                  state.indenter_contact_force[2], state.contact_index.size());
+    if (!(next < residual)) {
+      accepted.restore(state);
+      dt *= 0.5;
+      if (dt < dt_min || ++rejected_in_a_row > 12) break;
+      continue;
+    }
+    residual = next;
+    rejected_in_a_row = 0;
+    dt = std::min(dt_max, 2.0 * dt);
+  }
+  hold(state);
+  reset_health(model, opt, state);
+  out.converged = residual <= target();
+  if (!out.converged)
+    out.message = fmt::format("the continuation stalled at a residual of {:.3e} N (tolerance {:.3e} N)", residual,
+                              target());
+  out.indentation = indentation(model, state);
+  out.contact_force = state.indenter_contact_force[2];
+  out.active_count = static_cast<int>(state.contact_index.size());
+  for (size_t a = 0; a < state.contact_index.size(); ++a) {
+    const int i = state.contact_index[a];
+    out.max_penetration =
+        std::max(out.max_penetration, model.indenter_radius - (state.position.col(i) - tool_position).norm());
+  }
+  return out;
+}
+
 }  // namespace palpate

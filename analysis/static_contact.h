@@ -70,6 +70,20 @@ class LinearStaticContact {
 StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestSpec& rest, State& state, double force,
                              double residual_tolerance = 1e-6, int max_steps = 500);
 
+// The rest state with the tool HELD at `tool_position` (m; any model): the static
+// equilibrium of the body against a sphere that does not move, the truth a finite
+// difference of the local contact model (core/contact_stiffness.h) is taken against.
+// Pseudo-transient continuation as relax_to_rest, with the tool infinitely heavy and put
+// back at `tool_position` with zero velocity after every step, no command, health checks
+// off (the continuation is not dynamics), the contact solved to `contact_tolerance` (m),
+// until the largest net force on a free particle is below `residual_tolerance` times the
+// force on the tool (times 1 mN without contact).
+// Writes the state's positions, zero velocities, the tool centre and the contact set;
+// contact_force is the z component of the force of the body on the tool.
+StaticSolution relax_to_rest_at(const Model& model, const Options& opt, State& state, const Vec3& tool_position,
+                                double residual_tolerance = 1e-9, double contact_tolerance = 1e-12,
+                                int max_steps = 500);
+
 // Whether a model has the exact linear solve (the linear hex FEM).
 bool has_linear_static_solve(const Model& model);
 

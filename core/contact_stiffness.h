@@ -1,0 +1,116 @@
+#pragma once
+// The local contact model (docs/physics.md §2, "The local contact model", (2.7)-(2.15)):
+// the linearisation of the contact force on the tool about the tool's current centre,
+//
+//   F(x) ~ F0 + K (x - x0),   |x - x0| <= valid_radius,
+//
+// for a renderer (a haptic servo loop) that runs faster than the simulation. K = dF/dx
+// is the quasi-static stiffness of the contact for the current active set: what a finite
+// difference of two static solves with the tool held at nearby positions gives, not the
+// one-step inertial response. For a tool displacement dc the active particles stay on
+// the sphere (2.7) and the free particles stay in equilibrium (2.8), the contact
+// multipliers at the active particles being the only new loads, with the stiffness of
+// the normals' rotation (2.9). The particles' displacement solves a symmetric system on
+// the subspace of admissible displacements (2.10), by projected conjugate gradients:
+// three solves (dc = e_x, e_y, e_z), each warm-started from the previous call's. The
+// reactions (2.11) and the normals' rotation give dF (2.12); K is symmetric (2.13). The
+// validity radius (2.14), (2.15) is how far the tool may move before the active set
+// changes, to first order.
+//
+// A stage of its own: it reads a Model and a CarriedState and changes neither of
+// them, so a caller may run it on its own thread on a copy of the state. Each instance
+// owns its scratch (sized for the worst case at construction; evaluate() allocates
+// nothing) and its warm starts; instances share nothing.
+#include <cstdint>
+#include <vector>
+
+#include "core/model.h"
+#include "core/state.h"
+#include "core/types.h"
+
+namespace palpate {
+
+// The force of the body on the tool near x0 = origin:
+// F(x) = force + stiffness (x - origin) for |x - origin| <= valid_radius.
+struct LocalContactModel {
+  Vec3 origin{0, 0, 0};           // m, the tool centre x0 (State::indenter_center)
+  Vec3 force{0, 0, 0};            // N, F0 = State::indenter_contact_force
+  Mat3 stiffness = Mat3::Zero();  // N/m, K = dF/dx (2.12), column j = dF for dc = e_j
+  double valid_radius = 0.0;      // m (2.14), (2.15)
+  int64_t tick = 0;               // the state's tick it was computed at
+  int active_count = 0;           // particles in contact (the active set of (2.7))
+  int cg_iterations = 0;          // projected CG iterations of the three solves (2.10)
+  bool converged = true;          // all three solves met the tolerance
+  // Which bound set valid_radius, and where and along which direction it is reached.
+  enum class Limit {
+    no_contact,  // no active particle: the distance to the nearest free particle (2.15)
+    entering,    // a particle outside the active set reaches the sphere (2.14)
+    leaving,     // an active particle's multiplier reaches zero (2.14)
+  };
+  Limit limited_by = Limit::no_contact;
+  int limiting_particle = -1;           // the particle that enters or leaves (-1: none)
+  Vec3 limiting_direction{0, 0, 0};     // unit tool displacement that reaches it first
+};
+
+const char* to_string(LocalContactModel::Limit);
+
+// The projected CG of (2.10): relative residual ||r|| <= tolerance ||b|| per solve,
+// at most max_iterations iterations per solve.
+struct ContactStiffnessSettings {
+  double tolerance = 1e-6;
+  int max_iterations = 2000;
+};
+
+class ContactStiffness {
+ public:
+  // Sizes every scratch array for `model` (n particles, up to n active) and the
+  // block-Jacobi preconditioner of (2.10) from the model's reference tangent.
+  // Throws std::invalid_argument on a tolerance outside (0, 1) or max_iterations < 1.
+  explicit ContactStiffness(const Model& model, ContactStiffnessSettings settings = {});
+
+  // The local contact model at `state` (its positions, tool centre, contact set and
+  // multipliers), whatever the Options it was stepped with: K is quasi-static (no dt,
+  // damping or masses), for the tool's three translations whatever its guide, and a
+  // constant load such as gravity does not enter it. `model` must be the one the
+  // instance was built for. Throws std::invalid_argument when the state does not belong
+  // to the model.
+  LocalContactModel evaluate(const Model& model, const CarriedState& state);
+
+  // Forgets the warm starts: the next evaluate() starts its solves from zero (after a
+  // restored checkpoint, a new scene state, or to time a cold evaluation).
+  void clear_warm_start();
+
+  // The particles' quasi-static response of the last evaluate() to a unit tool
+  // displacement e_j (j = 0, 1, 2): dx/dc_j, 3 x n, zero at fixed particles (and all
+  // zero after an evaluation without contact). Also the next call's warm start.
+  const Points& displacement_response(int j) const { return response_[j]; }
+  // The multiplier increments of the last evaluate() (2.11): d mu_a / dc (N/m, component j
+  // for dc = e_j) of the a-th active particle (the order of CarriedState::contact_index).
+  Vec3 multiplier_response(int a) const { return multiplier_response_.row(a).transpose(); }
+
+ private:
+  void apply_operator(const Model& model, const Points& w, Points& out);  // out = P (K_b - G) P w (2.10)
+  void precondition(const Points& r, Points& z) const;                    // z = P D^-1 P r
+  void project(Points& w) const;                                          // w <- P w
+  int solve(const Model& model, const Points& b, Points& w, bool& converged);
+
+  int n_ = 0;
+  ContactStiffnessSettings settings_;
+  Workspace tangent_;  // the tangent's linearisation point (solid.h); only tangent_F / tangent_S_or_R are used
+  std::vector<uint8_t> movable_;        // n: 1 = free particle, 0 = fixed
+  std::vector<Mat3> diagonal_;          // n: D_i, the reference tangent's 3x3 diagonal block
+  std::vector<Mat3> diagonal_inverse_;  // n: D_i^-1 (0 at fixed particles)
+  // The active set of the current evaluation.
+  std::vector<int> active_;             // particle indices
+  std::vector<int> slot_;               // n: position of a particle in active_, -1 if not active
+  Points normal_;                       // 3 x (capacity n): n_a (2.2)
+  std::vector<double> multiplier_;      // mu_a, N
+  std::vector<double> geometric_;       // mu_a / |x_a - c|, N/m: the normal rotation's stiffness (2.8)
+  std::vector<Mat3> active_precond_;    // projected inverse blocks at the active particles
+  // Scratch of the solves.
+  Points u_p_, Ku_, b_, r_, z_, p_, Ap_, df_;
+  Points response_[3];  // dx/dc_j of the last call, the warm starts
+  Eigen::Matrix<double, Eigen::Dynamic, 3> multiplier_response_;
+};
+
+}  // namespace palpate
