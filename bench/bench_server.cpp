@@ -30,6 +30,7 @@
 #include <kj/async-io.h>
 #include <kj/timer.h>
 
+#include "bench/server_process.h"
 #include "cli/arguments.h"
 #include "protocol/palpate.capnp.h"
 
@@ -113,51 +114,6 @@ Args parse_args(int argc, char** argv) {
   });
   return a;
 }
-
-// palpate-server as a child process on 127.0.0.1:<system port>.
-struct ServerChild {
-  pid_t pid = -1;
-  std::string address;
-  ServerChild(const std::string& path, const Args& a) {
-    int out[2];
-    if (pipe(out) != 0) std::exit(1);
-    const std::string rate = std::to_string(a.rate);
-    pid = fork();
-    if (pid == 0) {
-      dup2(out[1], STDOUT_FILENO);
-      close(out[0]);
-      close(out[1]);
-      execl(path.c_str(), path.c_str(), "--listen", "127.0.0.1:0", "--scene", a.scene.c_str(), "--rate", rate.c_str(),
-            static_cast<char*>(nullptr));
-      _exit(127);
-    }
-    close(out[1]);
-    std::string line;
-    // The server validates and builds its default scene before it listens (seconds for
-    // the finer study scenes).
-    const auto deadline = Clock::now() + std::chrono::seconds(120);
-    while (line.find('\n') == std::string::npos && Clock::now() < deadline) {
-      char buf[256];
-      const ssize_t n = read(out[0], buf, sizeof buf);
-      if (n <= 0) break;
-      line.append(buf, static_cast<size_t>(n));
-    }
-    close(out[0]);
-    const auto at = line.find("listening on ");
-    if (at == std::string::npos) {
-      std::fprintf(stderr, "palpate-bench-server: the server did not start (%s)\n", path.c_str());
-      std::exit(1);
-    }
-    address = line.substr(at + 13);
-    while (!address.empty() && (address.back() == '\n' || address.back() == '\r')) address.pop_back();
-  }
-  ~ServerChild() {
-    if (pid > 0) {
-      kill(pid, SIGTERM);
-      waitpid(pid, nullptr, 0);
-    }
-  }
-};
 
 class Recorder final : public FrameSink::Server {
  public:
@@ -297,18 +253,12 @@ double percentile(std::vector<double> v, double q) {
 
 int main(int argc, char** argv) {
   const Args a = parse_args(argc, argv);
-  std::unique_ptr<ServerChild> child;
+  std::unique_ptr<palpate::bench::ServerProcess> child;
   std::string address = a.connect;
   if (address.empty()) {
-    std::string path = a.server;
-    if (path.empty()) {
-      char self[PATH_MAX] = {};
-      const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-      path = (fs::path(n > 0 ? std::string(self, static_cast<size_t>(n)) : std::string(argv[0])).parent_path() /
-              "palpate-server")
-                 .string();
-    }
-    child = std::make_unique<ServerChild>(path, a);
+    child = std::make_unique<palpate::bench::ServerProcess>(
+        palpate::bench::server_path(a.server, argv[0]),
+        std::vector<std::string>{"--scene", a.scene, "--rate", std::to_string(a.rate)}, "palpate-bench-server");
     address = child->address;
   }
 

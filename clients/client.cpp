@@ -14,6 +14,7 @@
 #include <kj/exception.h>
 
 #include "cli/arguments.h"
+#include "clients/haptic.h"
 #include "core/hertz.h"
 #include "protocol/palpate.capnp.h"
 
@@ -34,6 +35,17 @@ contact force (core/hertz.h) and d / d_H - 1; then the server's statistics.
 force within 0.1 % of the command, the indenter moving < 1e-6 m per 100 ticks and
 slower than 1e-5 m/s, for 5 chunks of 100 ticks in a row) or --max-steps, printing
 one row per force.
+--haptic-rate HZ: plays a haptic device (clients/haptic.h). Opens a real-time session
+with the tool free in 3-D (--set indenter.guide=free unless --set names the guide) and
+subscribes to every tick; over --seconds the device follows a palpation path (from the
+tool to above site A, press --depth below first touch, hold, slide to site B, lift, move
+in the air to site C, press, hold, lift), one setPosition per tick, pipelined, while a
+servo loop at HZ renders F = F0 + K (x - x0) from the newest frame's render model
+(clipped to its valid radius, saturated at --device-force). Live table: time, segment,
+device z, rendered Fz, the newest frame's render Fz and contact Fz. Then: command-to-
+force latency (setPosition to the first frame whose commandSeq includes it), the
+server's statistics, and the rendering error at each frame: its render force against
+the previous frame's local model at its target and against the zero-order hold.
   --connect ADDR:PORT  the server (default 127.0.0.1:7420)
   --scene NAME         a scene of the server's --scene-dir by name, e.g. hertz_cube_haptic
                        (default: the server's default scene)
@@ -47,10 +59,17 @@ one row per force.
                        (default 50)
   --headless           a headless session, stepped to rest force by force
   --max-steps N        headless: most ticks per force, >= 1 (default 20000)
+  --haptic-rate HZ     the haptic mode above with a servo loop at HZ, (0, 100000]
+  --depth M            haptic: device depth below first touch, m, > 0 (default R/5)
+  --device-stiffness K haptic: the device's largest stiffness, N/m, >= 0 (default 0: none)
+  --device-damping B   haptic: the device's largest damping, N s/m, >= 0 (default 0: none)
+  --device-force F     haptic: the device's largest force, N, >= 0 (default 0: none)
   --csv FILE           write every frame received (real time) or every row (headless):
                        the scalars above, then the tool's centre, the 3-D contact and
                        render forces and the local contact model (stiffness K row-major,
-                       N/m; its valid radius, m; the tick K was computed at)
+                       N/m; its valid radius, m; the tick K was computed at); haptic: one
+                       row per servo tick: time, segment, device x y z, rendered F xyz,
+                       the newest frame's tick, render force xyz and contact force xyz
   --help               print this text and exit
 Exit status: 0 when done; 1 when the connection fails or the server refuses (its
 message, naming the field, is printed); 2 for a wrong argument.
@@ -67,6 +86,9 @@ struct Args {
   bool headless = false;
   long max_steps = 20000;
   std::string csv;
+  double haptic_rate = 0;  // > 0: the haptic mode
+  double depth = 0;        // haptic: m below first touch; 0 = R/5
+  double device_stiffness = 0, device_damping = 0, device_force = 0;  // haptic: 0 = no limit
 };
 
 Args parse_args(int argc, char** argv) {
@@ -90,9 +112,21 @@ Args parse_args(int argc, char** argv) {
     } else if (flag == "--headless") a.headless = true;
     else if (flag == "--max-steps") a.max_steps = static_cast<long>(args.integer(1, 1000000000));
     else if (flag == "--csv") a.csv = args.value();
+    else if (flag == "--haptic-rate") {
+      a.haptic_rate = args.number();
+      if (!(a.haptic_rate > 0 && a.haptic_rate <= 100000))
+        throw std::invalid_argument("--haptic-rate: must be in (0, 100000] Hz");
+    } else if (flag == "--depth") {
+      a.depth = args.number();
+      if (!(a.depth > 0)) throw std::invalid_argument("--depth: must be > 0 m");
+    } else if (flag == "--device-stiffness") a.device_stiffness = args.number(0, 1e12);
+    else if (flag == "--device-damping") a.device_damping = args.number(0, 1e12);
+    else if (flag == "--device-force") a.device_force = args.number(0, 1e12);
     else return false;
     return true;
   });
+  if (a.haptic_rate > 0 && a.headless)
+    palpate::cli::usage_error("palpate-client", "--haptic-rate: needs a real-time session, not --headless", kUsage);
   return a;
 }
 
@@ -176,12 +210,24 @@ class Sink final : public FrameSink::Server {
   std::chrono::steady_clock::time_point start_;
 };
 
+// The haptic mode's overrides: the tool free in 3-D unless the user set the guide.
+std::vector<std::string> overrides_of(const Args& a) {
+  std::vector<std::string> o = a.overrides;
+  if (a.haptic_rate > 0 && std::none_of(o.begin(), o.end(), [](const std::string& s) {
+        return s.rfind("indenter.guide=", 0) == 0;
+      }))
+    o.push_back("indenter.guide=free");
+  return o;
+}
+
 void fill_open(PalpateServer::OpenSessionParams::Builder params, const Args& a, bool headless) {
   auto req = params.initRequest();
   if (!a.scene.empty()) req.getScene().setName(a.scene);
-  auto o = req.initOverrides(static_cast<unsigned>(a.overrides.size()));
-  for (unsigned k = 0; k < a.overrides.size(); ++k) o.set(k, a.overrides[k]);
+  const std::vector<std::string> overrides = overrides_of(a);
+  auto o = req.initOverrides(static_cast<unsigned>(overrides.size()));
+  for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
   req.setHeadless(headless);
+  if (a.haptic_rate > 0) palpate::haptic::set_device(req, a.device_stiffness, a.device_damping, a.device_force);
 }
 
 void write_csv(const std::string& path, const std::vector<Row>& rows, const Hertz& h) {
@@ -262,6 +308,52 @@ int run_realtime(const Args& a, Session::Client session, const Hertz& h, kj::Wai
   return 0;
 }
 
+// One row per servo tick of the haptic mode.
+void write_haptic_csv(const std::string& path, const palpate::haptic::Result& r) {
+  std::ofstream out(path);
+  if (!out) {
+    std::fprintf(stderr, "palpate-client: cannot write %s\n", path.c_str());
+    return;
+  }
+  out << "time_s,segment,device_x_m,device_y_m,device_z_m,rendered_fx_n,rendered_fy_n,rendered_fz_n,frame_tick,"
+         "frame_render_fx_n,frame_render_fy_n,frame_render_fz_n,frame_contact_fx_n,frame_contact_fy_n,"
+         "frame_contact_fz_n\n";
+  out.precision(9);
+  for (const auto& s : r.servo) {
+    out << s.t << ',' << r.segments[s.segment].label;
+    for (double v : s.device) out << ',' << v;
+    for (double v : s.rendered) out << ',' << v;
+    out << ',' << s.frame_tick;
+    for (double v : s.frame_force) out << ',' << v;
+    for (double v : s.contact_force) out << ',' << v;
+    out << '\n';
+  }
+}
+
+int run_haptic(const Args& a, Session::Client session, palpate::wire::SessionInfo::Reader info, kj::WaitScope& ws) {
+  palpate::haptic::Config config;
+  config.servo_hz = a.haptic_rate;
+  config.seconds = a.seconds;
+  config.depth = a.depth;
+  config.record_servo = !a.csv.empty();
+  std::printf("haptic: servo loop at %.0f Hz, one setPosition per tick (%.0f Hz); coupling %.0f N/m, %.1f N s/m; "
+              "device limits %g N/m, %g N s/m, %g N (0 = none)\n",
+              a.haptic_rate, info.getRateHz(), info.getCoupling().getStiffness(), info.getCoupling().getDamping(),
+              info.getDevice().getMaxStiffness(), info.getDevice().getMaxDamping(), info.getDevice().getMaxForce());
+  std::printf("%8s %-11s %11s %12s %12s %12s\n", "time[s]", "segment", "device z[m]", "rendered Fz", "frame Fz[N]",
+              "contact Fz");
+  auto live = [](const palpate::haptic::ServoSample& s, const char* segment) {
+    std::printf("%8.3f %-11s %11.5f %12.3f %12.3f %12.3f\n", s.t, segment, s.device[2], s.rendered[2],
+                s.frame_force[2], s.contact_force[2]);
+    std::fflush(stdout);
+  };
+  const palpate::haptic::Result r = palpate::haptic::run_palpation(session, info, ws, config, live);
+  std::printf("\n");
+  palpate::haptic::print_report(stdout, r);
+  if (!a.csv.empty()) write_haptic_csv(a.csv, r);
+  return 0;
+}
+
 int run_headless(const Args& a, Session::Client session, const Hertz& h, double dt, kj::WaitScope& ws) {
   std::vector<double> forces = a.forces;
   if (forces.empty()) {
@@ -334,9 +426,13 @@ int main(int argc, char** argv) {
                 info.getHeadless() ? "headless" : "real time", info.getRateHz(), info.getForceLimit(),
                 info.getBuildSeconds());
     if (a.headless) return run_headless(a, opened.getSession(), h, info.getDt(), ws);
+    if (a.haptic_rate > 0) return run_haptic(a, opened.getSession(), info, ws);
     return run_realtime(a, opened.getSession(), h, ws, client.getIoProvider().getTimer());
   } catch (const kj::Exception& e) {
     std::fprintf(stderr, "palpate-client: %s\n", e.getDescription().cStr());
+    return 1;
+  } catch (const std::exception& e) {  // the haptic loop: no frame, a session it cannot palpate
+    std::fprintf(stderr, "palpate-client: %s\n", e.what());
     return 1;
   }
 }

@@ -20,6 +20,7 @@
 #include <fstream>
 #include <mutex>
 #include <random>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -1041,6 +1042,52 @@ TEST(ServerE2E, ShutdownDeliversDoneToEverySubscriber) {
   EXPECT_EQ(own.terminate(std::chrono::seconds(5)), 0);
 }
 
+// palpate-client --haptic-rate against the test server: a coarse hertz_cube (top face
+// z = 0, R = 0.5 m, so first touch at z = 0.5 and the default depth R/5 puts the device at
+// z = 0.4 when it holds), the tool freed by the client. It runs the palpation path, exits
+// 0, prints the summary, and its CSV shows the device pressing and a force pushing it up.
+TEST(ServerE2E, HapticClientPalpatesAndReports) {
+#ifdef PALPATE_SANITIZED
+  const std::string servo_hz = "1000";  // the sanitized client and server are several times slower
+#else
+  const std::string servo_hz = "2000";
+#endif
+  SceneFolder folder;
+  const std::string csv = folder.dir + "/haptic.csv";
+  const ProgramResult r = run_program({PALPATE_CLIENT_BIN, "--connect", g_server->address(), "--scene", "hertz_cube",
+                                       "--set", "body.distribution.per_edge=8", "--haptic-rate", servo_hz,
+                                       "--seconds", "1", "--csv", csv},
+                                      std::chrono::seconds(60));
+  ASSERT_EQ(r.status, 0) << r.out << r.err;
+  for (const char* line : {"command->force    p50", "tick lateness     p50", "servo loop", "rendering error",
+                           "  slide A-B", "  all "})
+    EXPECT_NE(r.out.find(line), std::string::npos) << line << "\n" << r.out;
+  unsigned matched = 0, sent = 0;
+  const auto at = r.out.find("ms (");
+  ASSERT_NE(at, std::string::npos) << r.out;
+  ASSERT_EQ(std::sscanf(r.out.c_str() + at, "ms (%u of %u setPosition matched)", &matched, &sent), 2) << r.out;
+  EXPECT_GT(sent, 300u);  // one per tick of a 1 kHz loop for 1 s, a live one even when sanitized
+  EXPECT_GE(matched, sent * 9 / 10);
+
+  std::ifstream in(csv);
+  std::string header;
+  ASSERT_TRUE(std::getline(in, header));
+  EXPECT_EQ(header.rfind("time_s,segment,device_x_m,device_y_m,device_z_m,rendered_fx_n", 0), 0u) << header;
+  size_t rows = 0;
+  double lowest = HUGE_VAL, strongest = -HUGE_VAL;
+  for (std::string line; std::getline(in, line); ++rows) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
+    ASSERT_EQ(cells.size(), 15u) << line;
+    lowest = std::min(lowest, std::stod(cells[4]));
+    strongest = std::max(strongest, std::stod(cells[7]));
+  }
+  EXPECT_GT(rows, static_cast<size_t>(std::stod(servo_hz) / 4));  // the servo ticks of 1 s, many skipped at worst
+  EXPECT_NEAR(lowest, 0.4, 1e-9);   // holding at R/5 below first touch
+  EXPECT_GT(strongest, 1.0);        // the body pushes the device up (N)
+}
+
 // The network programs share the argument helper (cli/arguments.h): --help prints the
 // whole usage on stdout and exits 0; garbage values are refused with exit 2.
 TEST(ServerE2E, ProgramsPrintTheirUsageAndRefuseGarbage) {
@@ -1048,7 +1095,8 @@ TEST(ServerE2E, ProgramsPrintTheirUsageAndRefuseGarbage) {
     std::string bin, name;
   } programs[] = {{PALPATE_SERVER_BIN, "palpate-server"},
                   {PALPATE_CLIENT_BIN, "palpate-client"},
-                  {PALPATE_BENCH_SERVER_BIN, "palpate-bench-server"}};
+                  {PALPATE_BENCH_SERVER_BIN, "palpate-bench-server"},
+                  {PALPATE_BENCH_HAPTIC_BIN, "palpate-bench-haptic"}};
   for (const auto& p : programs) {
     for (const std::string help : {"--help", "-h"}) {
       const ProgramResult r = run_program({p.bin, help}, std::chrono::seconds(20));
@@ -1070,6 +1118,11 @@ TEST(ServerE2E, ProgramsPrintTheirUsageAndRefuseGarbage) {
     EXPECT_EQ(missing.status, 2) << p.name;
     EXPECT_NE(missing.err.find("--rate needs a value"), std::string::npos) << missing.err;
   }
+  const ProgramResult client_help = run_program({PALPATE_CLIENT_BIN, "--help"}, std::chrono::seconds(20));
+  EXPECT_NE(client_help.out.find("--haptic-rate HZ"), std::string::npos) << client_help.out;
+  const ProgramResult haptic_rate = run_program({PALPATE_CLIENT_BIN, "--haptic-rate", "0"}, std::chrono::seconds(20));
+  EXPECT_EQ(haptic_rate.status, 2);
+  EXPECT_NE(haptic_rate.err.find("--haptic-rate: must be in (0, 100000] Hz"), std::string::npos) << haptic_rate.err;
   const ProgramResult steps = run_program({PALPATE_CLIENT_BIN, "--max-steps", "1.5"}, std::chrono::seconds(20));
   EXPECT_EQ(steps.status, 2);
   EXPECT_NE(steps.err.find("--max-steps: '1.5' is not an integer"), std::string::npos) << steps.err;

@@ -1,0 +1,205 @@
+// palpate-bench-haptic: the haptic client loop against palpate-server (issue #13).
+// Usage: kUsage below (palpate-bench-haptic --help).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <capnp/ez-rpc.h>
+#include <kj/async-io.h>
+
+#include "bench/server_process.h"
+#include "cli/arguments.h"
+#include "clients/haptic.h"
+#include "protocol/palpate.capnp.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using palpate::wire::PalpateServer;
+
+const char* kUsage = R"(usage: palpate-bench-haptic [options]
+The haptic client loop of palpate-client --haptic-rate (clients/haptic.h) as a
+benchmark. Starts the server (palpate-server next to this executable, on a loopback
+port the system picks, serving --scene at --rate) unless --connect is given, opens a
+real-time session with the tool free in 3-D (indenter.guide=free unless --set names
+the guide), subscribes to every tick and, for --seconds, moves the device along the
+palpation path (above site A, press --depth below first touch, hold, slide to B, lift,
+move in the air to C, press, hold, lift) with one setPosition per tick, pipelined,
+while a servo loop at --haptic-rate renders the newest frame's local model. Prints:
+command-to-force latency (setPosition to the first frame whose commandSeq includes it,
+ms), the server's tick lateness, deadline misses, skipped ticks and blow-ups, and the
+rendering error at each frame (its render force against the previous frame's local
+model at its target, and against the zero-order hold: median / p99 / max in N and in %
+of the run's peak force), overall and per segment. --repeat N runs N sessions one
+after the other and prints each run's tail figures (lateness p99, misses) and their
+median: tail figures swing on a shared machine.
+  --json               print one JSON object instead of the table
+  --seconds S          length of each run (the path's duration), (0, 86400] (default 10)
+  --haptic-rate HZ     the servo loop's rate, (0, 100000] (default 4000)
+  --repeat N           sessions run one after the other, [1, 100] (default 1)
+  --scene FILE         the scene, served as the server's default scene (default:
+                       scenes/palpation_block.json of the source tree if it exists, else
+                       scenes/hertz_cube_haptic.json; ignored with --connect, where the
+                       server's default scene is used)
+  --rate HZ            the server loop's rate, (0, 10000] (default 1000)
+  --set KEY=VALUE      override a scene field of the session (repeatable)
+  --depth M            device depth below first touch, m, > 0 (default R/5)
+  --device-stiffness K the device's largest stiffness, N/m, >= 0 (default 0: none)
+  --device-damping B   the device's largest damping, N s/m, >= 0 (default 0: none)
+  --device-force F     the device's largest force, N, >= 0 (default 0: none)
+  --connect ADDR:PORT  use this running server instead of starting one
+  --server PATH        the server executable to start (default: palpate-server next to
+                       this executable)
+  --help               print this text and exit
+Exit status: 0 when done; 1 when the server does not start, the connection fails or the
+server refuses; 2 for a wrong argument.
+)";
+
+std::string default_scene() {
+  const std::string block = PALPATE_SOURCE_DIR "/scenes/palpation_block.json";
+  return fs::exists(block) ? block : PALPATE_SOURCE_DIR "/scenes/hertz_cube_haptic.json";
+}
+
+struct Args {
+  bool json = false;
+  double seconds = 10.0;
+  double haptic_rate = 4000.0;
+  int repeat = 1;
+  std::string scene = default_scene();
+  double rate = 1000.0;
+  std::vector<std::string> overrides;
+  double depth = 0;
+  double device_stiffness = 0, device_damping = 0, device_force = 0;
+  std::string connect;
+  std::string server;
+};
+
+Args parse_args(int argc, char** argv) {
+  Args a;
+  palpate::cli::parse_or_exit(argc, argv, "palpate-bench-haptic", kUsage, [&](palpate::cli::Arguments& args) {
+    const std::string& flag = args.flag();
+    if (flag == "--json") a.json = true;
+    else if (flag == "--seconds") {
+      a.seconds = args.number();
+      if (!(a.seconds > 0 && a.seconds <= 86400)) throw std::invalid_argument("--seconds: must be in (0, 86400] s");
+    } else if (flag == "--haptic-rate") {
+      a.haptic_rate = args.number();
+      if (!(a.haptic_rate > 0 && a.haptic_rate <= 100000))
+        throw std::invalid_argument("--haptic-rate: must be in (0, 100000] Hz");
+    } else if (flag == "--repeat") a.repeat = static_cast<int>(args.integer(1, 100));
+    else if (flag == "--scene") a.scene = fs::absolute(args.value()).string();
+    else if (flag == "--rate") {
+      a.rate = args.number();
+      if (!(a.rate > 0 && a.rate <= 10000)) throw std::invalid_argument("--rate: must be in (0, 10000] Hz");
+    } else if (flag == "--set") {
+      const std::string assignment = args.value();
+      palpate::cli::scene_override(assignment);
+      a.overrides.push_back(assignment);
+    } else if (flag == "--depth") {
+      a.depth = args.number();
+      if (!(a.depth > 0)) throw std::invalid_argument("--depth: must be > 0 m");
+    } else if (flag == "--device-stiffness") a.device_stiffness = args.number(0, 1e12);
+    else if (flag == "--device-damping") a.device_damping = args.number(0, 1e12);
+    else if (flag == "--device-force") a.device_force = args.number(0, 1e12);
+    else if (flag == "--connect") a.connect = args.value();
+    else if (flag == "--server") a.server = args.value();
+    else return false;
+    return true;
+  });
+  if (std::none_of(a.overrides.begin(), a.overrides.end(),
+                   [](const std::string& s) { return s.rfind("indenter.guide=", 0) == 0; }))
+    a.overrides.push_back("indenter.guide=free");
+  return a;
+}
+
+double median(std::vector<double> v) { return palpate::haptic::percentile(v, 0.5); }
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Args a = parse_args(argc, argv);
+  std::unique_ptr<palpate::bench::ServerProcess> child;
+  std::string address = a.connect;
+  if (address.empty()) {
+    child = std::make_unique<palpate::bench::ServerProcess>(
+        palpate::bench::server_path(a.server, argv[0]),
+        std::vector<std::string>{"--scene", a.scene, "--rate", std::to_string(a.rate), "--log-level", "error"},
+        "palpate-bench-haptic");
+    address = child->address;
+  }
+  try {
+    capnp::ReaderOptions options;
+    options.traversalLimitInWords = 256 * 1024 * 1024;
+    capnp::EzRpcClient client(address, 7420, options);
+    auto& ws = client.getWaitScope();
+    auto server = client.getMain<PalpateServer>();
+    palpate::haptic::Config config;
+    config.servo_hz = a.haptic_rate;
+    config.seconds = a.seconds;
+    config.depth = a.depth;
+    std::vector<palpate::haptic::Result> runs;
+    std::string scene_name;
+    uint32_t particles = 0;
+    double coupling_k = 0, coupling_b = 0;
+    for (int run = 0; run < a.repeat; ++run) {
+      auto open = server.openSessionRequest();
+      auto req = open.initRequest();
+      auto o = req.initOverrides(static_cast<unsigned>(a.overrides.size()));
+      for (unsigned k = 0; k < a.overrides.size(); ++k) o.set(k, a.overrides[k]);
+      palpate::haptic::set_device(req, a.device_stiffness, a.device_damping, a.device_force);
+      auto opened = open.send().wait(ws);
+      auto info = opened.getInfo();
+      scene_name = info.getSceneName().cStr();
+      particles = info.getParticleCount();
+      coupling_k = info.getCoupling().getStiffness();
+      coupling_b = info.getCoupling().getDamping();
+      auto session = opened.getSession();
+      runs.push_back(palpate::haptic::run_palpation(session, info, ws, config));
+      session.closeRequest().send().wait(ws);
+      if (!a.json) {
+        std::printf("== run %d of %d: scene %s (%u particles), %.0f s, servo %.0f Hz, coupling %.0f N/m %.1f N s/m\n",
+                    run + 1, a.repeat, scene_name.c_str(), particles, a.seconds, a.haptic_rate, coupling_k,
+                    coupling_b);
+        palpate::haptic::print_report(stdout, runs.back());
+      }
+    }
+    std::vector<double> lateness, misses, skipped, latency;
+    for (const auto& r : runs) {
+      lateness.push_back(r.server.lateness_p99_us);
+      misses.push_back(static_cast<double>(r.server.deadline_misses));
+      skipped.push_back(static_cast<double>(r.server.skipped_ticks));
+      latency.push_back(r.latency_ms.p99);
+    }
+    if (a.json) {
+      std::string runs_json;
+      for (size_t k = 0; k < runs.size(); ++k)
+        runs_json += std::string(k ? ", " : "") + "{" + palpate::haptic::json_fields(runs[k]) + "}";
+      std::printf("{\"scene\": \"%s\", \"scene_file\": \"%s\", \"particles\": %u, \"seconds\": %.3f, "
+                  "\"haptic_rate_hz\": %.1f, \"coupling_stiffness\": %.3f, \"coupling_damping\": %.3f, "
+                  "\"repeat\": %d, \"median_lateness_p99_us\": %.1f, \"median_deadline_misses\": %.1f, "
+                  "\"median_skipped_ticks\": %.1f, \"median_latency_p99_ms\": %.4f, \"runs\": [%s]}\n",
+                  scene_name.c_str(), a.connect.empty() ? a.scene.c_str() : "", particles, a.seconds, a.haptic_rate,
+                  coupling_k, coupling_b, a.repeat, median(lateness), median(misses), median(skipped),
+                  median(latency), runs_json.c_str());
+    } else if (a.repeat > 1) {
+      std::printf("== tail figures over %d runs\n", a.repeat);
+      for (size_t k = 0; k < runs.size(); ++k)
+        std::printf("run %zu            lateness p99 %.0f us, deadline misses %llu, skipped %llu, latency p99 %.3f ms\n",
+                    k + 1, lateness[k], static_cast<unsigned long long>(runs[k].server.deadline_misses),
+                    static_cast<unsigned long long>(runs[k].server.skipped_ticks), latency[k]);
+      std::printf("median           lateness p99 %.0f us, deadline misses %.0f, skipped %.0f, latency p99 %.3f ms\n",
+                  median(lateness), median(misses), median(skipped), median(latency));
+    }
+  } catch (const kj::Exception& e) {
+    std::fprintf(stderr, "palpate-bench-haptic: %s\n", e.getDescription().cStr());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "palpate-bench-haptic: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
