@@ -67,13 +67,11 @@ std::string default_scene() {
 struct Args {
   bool json = false;
   double seconds = 10.0;
-  double haptic_rate = 4000.0;
   int repeat = 1;
   std::string scene = default_scene();
   double rate = 1000.0;
   std::vector<std::string> overrides;
-  double depth = 0;
-  double device_stiffness = 0, device_damping = 0, device_force = 0;
+  palpate::haptic::DeviceFlags haptic{4000.0};
   std::string connect;
   std::string server;
 };
@@ -86,10 +84,6 @@ Args parse_args(int argc, char** argv) {
     else if (flag == "--seconds") {
       a.seconds = args.number();
       if (!(a.seconds > 0 && a.seconds <= 86400)) throw std::invalid_argument("--seconds: must be in (0, 86400] s");
-    } else if (flag == "--haptic-rate") {
-      a.haptic_rate = args.number();
-      if (!(a.haptic_rate > 0 && a.haptic_rate <= 100000))
-        throw std::invalid_argument("--haptic-rate: must be in (0, 100000] Hz");
     } else if (flag == "--repeat") a.repeat = static_cast<int>(args.integer(1, 100));
     else if (flag == "--scene") a.scene = fs::absolute(args.value()).string();
     else if (flag == "--rate") {
@@ -99,20 +93,13 @@ Args parse_args(int argc, char** argv) {
       const std::string assignment = args.value();
       palpate::cli::scene_override(assignment);
       a.overrides.push_back(assignment);
-    } else if (flag == "--depth") {
-      a.depth = args.number();
-      if (!(a.depth > 0)) throw std::invalid_argument("--depth: must be > 0 m");
-    } else if (flag == "--device-stiffness") a.device_stiffness = args.number(0, 1e12);
-    else if (flag == "--device-damping") a.device_damping = args.number(0, 1e12);
-    else if (flag == "--device-force") a.device_force = args.number(0, 1e12);
-    else if (flag == "--connect") a.connect = args.value();
+    } else if (palpate::haptic::parse_device_flag(args, a.haptic)) {
+    } else if (flag == "--connect") a.connect = args.value();
     else if (flag == "--server") a.server = args.value();
     else return false;
     return true;
   });
-  if (std::none_of(a.overrides.begin(), a.overrides.end(),
-                   [](const std::string& s) { return s.rfind("indenter.guide=", 0) == 0; }))
-    a.overrides.push_back("indenter.guide=free");
+  a.overrides = palpate::haptic::with_free_guide(a.overrides);
   return a;
 }
 
@@ -138,9 +125,9 @@ int main(int argc, char** argv) {
     auto& ws = client.getWaitScope();
     auto server = client.getMain<PalpateServer>();
     palpate::haptic::Config config;
-    config.servo_hz = a.haptic_rate;
+    config.servo_hz = a.haptic.haptic_rate;
     config.seconds = a.seconds;
-    config.depth = a.depth;
+    config.depth = a.haptic.depth;
     std::vector<palpate::haptic::Result> runs;
     std::string scene_name;
     uint32_t particles = 0;
@@ -150,7 +137,7 @@ int main(int argc, char** argv) {
       auto req = open.initRequest();
       auto o = req.initOverrides(static_cast<unsigned>(a.overrides.size()));
       for (unsigned k = 0; k < a.overrides.size(); ++k) o.set(k, a.overrides[k]);
-      palpate::haptic::set_device(req, a.device_stiffness, a.device_damping, a.device_force);
+      palpate::haptic::set_device(req, a.haptic.device_stiffness, a.haptic.device_damping, a.haptic.device_force);
       auto opened = open.send().wait(ws);
       auto info = opened.getInfo();
       scene_name = info.getSceneName().cStr();
@@ -162,7 +149,7 @@ int main(int argc, char** argv) {
       session.closeRequest().send().wait(ws);
       if (!a.json) {
         std::printf("== run %d of %d: scene %s (%u particles), %.0f s, servo %.0f Hz, coupling %.0f N/m %.1f N s/m\n",
-                    run + 1, a.repeat, scene_name.c_str(), particles, a.seconds, a.haptic_rate, coupling_k,
+                    run + 1, a.repeat, scene_name.c_str(), particles, a.seconds, a.haptic.haptic_rate, coupling_k,
                     coupling_b);
         palpate::haptic::print_report(stdout, runs.back());
       }
@@ -182,7 +169,7 @@ int main(int argc, char** argv) {
                   "\"haptic_rate_hz\": %.1f, \"coupling_stiffness\": %.3f, \"coupling_damping\": %.3f, "
                   "\"repeat\": %d, \"median_lateness_p99_us\": %.1f, \"median_deadline_misses\": %.1f, "
                   "\"median_skipped_ticks\": %.1f, \"median_latency_p99_ms\": %.4f, \"runs\": [%s]}\n",
-                  scene_name.c_str(), a.connect.empty() ? a.scene.c_str() : "", particles, a.seconds, a.haptic_rate,
+                  scene_name.c_str(), a.connect.empty() ? a.scene.c_str() : "", particles, a.seconds, a.haptic.haptic_rate,
                   coupling_k, coupling_b, a.repeat, median(lateness), median(misses), median(skipped),
                   median(latency), runs_json.c_str());
     } else if (a.repeat > 1) {

@@ -86,9 +86,7 @@ struct Args {
   bool headless = false;
   long max_steps = 20000;
   std::string csv;
-  double haptic_rate = 0;  // > 0: the haptic mode
-  double depth = 0;        // haptic: m below first touch; 0 = R/5
-  double device_stiffness = 0, device_damping = 0, device_force = 0;  // haptic: 0 = no limit
+  palpate::haptic::DeviceFlags haptic;  // haptic_rate > 0: the haptic mode
 };
 
 Args parse_args(int argc, char** argv) {
@@ -112,20 +110,11 @@ Args parse_args(int argc, char** argv) {
     } else if (flag == "--headless") a.headless = true;
     else if (flag == "--max-steps") a.max_steps = static_cast<long>(args.integer(1, 1000000000));
     else if (flag == "--csv") a.csv = args.value();
-    else if (flag == "--haptic-rate") {
-      a.haptic_rate = args.number();
-      if (!(a.haptic_rate > 0 && a.haptic_rate <= 100000))
-        throw std::invalid_argument("--haptic-rate: must be in (0, 100000] Hz");
-    } else if (flag == "--depth") {
-      a.depth = args.number();
-      if (!(a.depth > 0)) throw std::invalid_argument("--depth: must be > 0 m");
-    } else if (flag == "--device-stiffness") a.device_stiffness = args.number(0, 1e12);
-    else if (flag == "--device-damping") a.device_damping = args.number(0, 1e12);
-    else if (flag == "--device-force") a.device_force = args.number(0, 1e12);
-    else return false;
+    else if (palpate::haptic::parse_device_flag(args, a.haptic)) {
+    } else return false;
     return true;
   });
-  if (a.haptic_rate > 0 && a.headless)
+  if (a.haptic.haptic_rate > 0 && a.headless)
     palpate::cli::usage_error("palpate-client", "--haptic-rate: needs a real-time session, not --headless", kUsage);
   return a;
 }
@@ -212,12 +201,7 @@ class Sink final : public FrameSink::Server {
 
 // The haptic mode's overrides: the tool free in 3-D unless the user set the guide.
 std::vector<std::string> overrides_of(const Args& a) {
-  std::vector<std::string> o = a.overrides;
-  if (a.haptic_rate > 0 && std::none_of(o.begin(), o.end(), [](const std::string& s) {
-        return s.rfind("indenter.guide=", 0) == 0;
-      }))
-    o.push_back("indenter.guide=free");
-  return o;
+  return a.haptic.haptic_rate > 0 ? palpate::haptic::with_free_guide(a.overrides) : a.overrides;
 }
 
 void fill_open(PalpateServer::OpenSessionParams::Builder params, const Args& a, bool headless) {
@@ -227,7 +211,7 @@ void fill_open(PalpateServer::OpenSessionParams::Builder params, const Args& a, 
   auto o = req.initOverrides(static_cast<unsigned>(overrides.size()));
   for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
   req.setHeadless(headless);
-  if (a.haptic_rate > 0) palpate::haptic::set_device(req, a.device_stiffness, a.device_damping, a.device_force);
+  if (a.haptic.haptic_rate > 0) palpate::haptic::set_device(req, a.haptic.device_stiffness, a.haptic.device_damping, a.haptic.device_force);
 }
 
 void write_csv(const std::string& path, const std::vector<Row>& rows, const Hertz& h) {
@@ -332,13 +316,13 @@ void write_haptic_csv(const std::string& path, const palpate::haptic::Result& r)
 
 int run_haptic(const Args& a, Session::Client session, palpate::wire::SessionInfo::Reader info, kj::WaitScope& ws) {
   palpate::haptic::Config config;
-  config.servo_hz = a.haptic_rate;
+  config.servo_hz = a.haptic.haptic_rate;
   config.seconds = a.seconds;
-  config.depth = a.depth;
+  config.depth = a.haptic.depth;
   config.record_servo = !a.csv.empty();
   std::printf("haptic: servo loop at %.0f Hz, one setPosition per tick (%.0f Hz); coupling %.0f N/m, %.1f N s/m; "
               "device limits %g N/m, %g N s/m, %g N (0 = none)\n",
-              a.haptic_rate, info.getRateHz(), info.getCoupling().getStiffness(), info.getCoupling().getDamping(),
+              a.haptic.haptic_rate, info.getRateHz(), info.getCoupling().getStiffness(), info.getCoupling().getDamping(),
               info.getDevice().getMaxStiffness(), info.getDevice().getMaxDamping(), info.getDevice().getMaxForce());
   std::printf("%8s %-11s %11s %12s %12s %12s\n", "time[s]", "segment", "device z[m]", "rendered Fz", "frame Fz[N]",
               "contact Fz");
@@ -426,7 +410,7 @@ int main(int argc, char** argv) {
                 info.getHeadless() ? "headless" : "real time", info.getRateHz(), info.getForceLimit(),
                 info.getBuildSeconds());
     if (a.headless) return run_headless(a, opened.getSession(), h, info.getDt(), ws);
-    if (a.haptic_rate > 0) return run_haptic(a, opened.getSession(), info, ws);
+    if (a.haptic.haptic_rate > 0) return run_haptic(a, opened.getSession(), info, ws);
     return run_realtime(a, opened.getSession(), h, ws, client.getIoProvider().getTimer());
   } catch (const kj::Exception& e) {
     std::fprintf(stderr, "palpate-client: %s\n", e.getDescription().cStr());

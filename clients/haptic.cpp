@@ -293,6 +293,29 @@ void set_device(wire::OpenRequest::Builder request, double max_stiffness, double
   d.setMaxForce(max_force);
 }
 
+bool parse_device_flag(cli::Arguments& args, DeviceFlags& d) {
+  const std::string& flag = args.flag();
+  if (flag == "--haptic-rate") {
+    d.haptic_rate = args.number();
+    if (!(d.haptic_rate > 0 && d.haptic_rate <= 100000))
+      throw std::invalid_argument("--haptic-rate: must be in (0, 100000] Hz");
+  } else if (flag == "--depth") {
+    d.depth = args.number();
+    if (!(d.depth > 0)) throw std::invalid_argument("--depth: must be > 0 m");
+  } else if (flag == "--device-stiffness") d.device_stiffness = args.number(0, 1e12);
+  else if (flag == "--device-damping") d.device_damping = args.number(0, 1e12);
+  else if (flag == "--device-force") d.device_force = args.number(0, 1e12);
+  else return false;
+  return true;
+}
+
+std::vector<std::string> with_free_guide(std::vector<std::string> overrides) {
+  if (std::none_of(overrides.begin(), overrides.end(),
+                   [](const std::string& s) { return s.rfind("indenter.guide=", 0) == 0; }))
+    overrides.push_back("indenter.guide=free");
+  return overrides;
+}
+
 namespace {
 
 // What the sink hands to the loop; shared, because the sink may outlive the loop

@@ -13,6 +13,7 @@
 
 #include <kj/async.h>
 
+#include "cli/arguments.h"
 #include "protocol/palpate.capnp.h"
 
 namespace palpate::haptic {
@@ -223,6 +224,19 @@ struct Result {
 
 // The device limits of an OpenRequest (0 = none).
 void set_device(wire::OpenRequest::Builder request, double max_stiffness, double max_damping, double max_force);
+
+// The flags every haptic front-end takes (palpate-client --haptic-rate, palpate-bench-haptic).
+struct DeviceFlags {
+  double haptic_rate = 0;  // --haptic-rate HZ: the servo loop, (0, 100000]
+  double depth = 0;        // --depth M: below first touch, > 0; 0 = R/5
+  double device_stiffness = 0, device_damping = 0, device_force = 0;  // --device-*: 0 = no limit
+};
+// Takes args.flag() if it is one of DeviceFlags' (true), else leaves it (false); throws
+// std::invalid_argument naming the flag on a bad value (cli::parse_or_exit's contract).
+bool parse_device_flag(cli::Arguments& args, DeviceFlags& flags);
+// The overrides with "indenter.guide=free" added unless they set the guide: a palpation
+// slides, which the vertical guide would render as its lateral restoring force.
+std::vector<std::string> with_free_guide(std::vector<std::string> overrides);
 
 // Runs the palpation path on a real-time session: subscribes to every tick (scalars
 // only), waits for the first frame (the path starts at the tool's position), then for

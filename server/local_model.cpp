@@ -124,9 +124,11 @@ Mat3 passive_stiffness(const Mat3& K) {
 }
 
 LocalModel render_model(const LocalModel& contact, bool position_mode, const Vec3& target,
-                        const Vec3& render_force, const CouplingOptions& coupling) {
+                        const Vec3& render_force, const CouplingOptions& coupling, double contact_floor) {
   LocalModel r = contact;
   r.stiffness = passive_stiffness(contact.stiffness);
+  const bool touching = contact.force.squaredNorm() > 0.0;
+  if (touching && contact.stiffness_tick >= 0) r.valid_radius = std::max(r.valid_radius, contact_floor);
   if (!position_mode) return r;
   r.origin = target;
   r.force = render_force;

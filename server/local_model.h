@@ -84,7 +84,11 @@ LocalModel contact_model_now(const State& state, const LocalContactModel& newest
 // where K_c is negative semi-definite, so the contact model's radius serves. Force
 // mode: the contact model itself, about the tool's centre. Either way the stiffness is
 // then made passive (passive_stiffness): a device must not be handed an active element.
+// The radius: in contact at least `contact_floor` (docs/protocol.md: the force is
+// continuous where the active set changes, only K jumps, so the strict first-order
+// radius of the contact model, often micrometres, would throw the model away); out of
+// contact the contact model's (the distance to the body).
 LocalModel render_model(const LocalModel& contact, bool position_mode, const Vec3& target,
-                        const Vec3& render_force, const CouplingOptions& coupling);
+                        const Vec3& render_force, const CouplingOptions& coupling, double contact_floor);
 
 }  // namespace palpate::server

@@ -407,8 +407,9 @@ void Simulation::fill_local_models(Snapshot& s) const {
     return m;
   }();
   s.contact_model = contact_model_now(state, stiffness_ ? stiffness_->newest() : none);
-  s.render_model =
-      render_model(s.contact_model, position_mode_, state.tool_target, s.render_force, options_.coupling);
+  // The render model's radius in contact: half the model's smallest particle spacing.
+  s.render_model = render_model(s.contact_model, position_mode_, state.tool_target, s.render_force,
+                                options_.coupling, 0.5 * model_->min_spacing);
 }
 
 void Simulation::publish() {

@@ -61,7 +61,7 @@ TEST(LocalModel, RenderStiffnessIsTheCouplingAndTheContactInSeries) {
   contact.origin = c;
   contact.force = contact_force(c);
   contact.stiffness = contact_stiffness(c);
-  const LocalModel r = render_model(contact, true, xd, rendered(xd, k), CouplingOptions{k, 5.0});
+  const LocalModel r = render_model(contact, true, xd, rendered(xd, k), CouplingOptions{k, 5.0}, 0.0);
   EXPECT_EQ(r.origin, xd);
   // Central differences of the exact equilibrium, column by column.
   const double h = 1e-6;
@@ -100,7 +100,7 @@ TEST(LocalModel, TheRenderedStiffnessIsPassive) {
   EXPECT_TRUE(palpate::server::passive_stiffness(N).isApprox(N, 1e-14));
   LocalModel contact;
   contact.stiffness = K;
-  const LocalModel r = render_model(contact, false, Vec3::Zero(), Vec3::Zero(), CouplingOptions{});
+  const LocalModel r = render_model(contact, false, Vec3::Zero(), Vec3::Zero(), CouplingOptions{}, 0.0);
   EXPECT_TRUE(r.stiffness.isApprox(P, 1e-12));
 }
 
@@ -111,8 +111,15 @@ TEST(LocalModel, ForceModeRendersTheContactModelItself) {
   contact.stiffness = -Mat3::Identity() * 7.0;
   contact.valid_radius = 0.01;
   contact.stiffness_tick = 42;
-  const LocalModel r = render_model(contact, false, Vec3(9, 9, 9), Vec3(5, 5, 5), CouplingOptions{100.0, 1.0});
+  LocalModel r = render_model(contact, false, Vec3(9, 9, 9), Vec3(5, 5, 5), CouplingOptions{100.0, 1.0}, 0.001);
   EXPECT_EQ(r.origin, contact.origin);
+  EXPECT_EQ(r.valid_radius, 0.01);  // above the floor: kept
+  contact.valid_radius = 1e-6;      // in contact, below the floor: raised to it
+  EXPECT_EQ(render_model(contact, false, Vec3(), Vec3(), CouplingOptions{}, 0.001).valid_radius, 0.001);
+  contact.force.setZero();          // out of contact: the distance to the body, never raised
+  EXPECT_EQ(render_model(contact, false, Vec3(), Vec3(), CouplingOptions{}, 0.001).valid_radius, 1e-6);
+  contact.force = Vec3(0, 0, 4);
+  contact.valid_radius = 0.01;
   EXPECT_EQ(r.force, contact.force);
   EXPECT_EQ(r.stiffness, contact.stiffness);
   EXPECT_EQ(r.stiffness_tick, 42);
