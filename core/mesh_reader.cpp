@@ -2,8 +2,9 @@
 //
 // Both formats are read by one whitespace tokenizer that knows the line of every
 // token (for messages) and, for TetGen, skips '#' comments. Node references are
-// resolved after the whole file is read; the tetrahedra are then checked
-// (degenerate, inverted), the unused nodes dropped and the volumes lumped.
+// resolved after the whole file is read; assemble() then checks the mesh
+// (degenerate, inverted, unused nodes, coincident nodes, overlapping faces, one part:
+// the rules in mesh_reader.h), drops TetGen's mid-edge nodes and lumps the volumes.
 #include "core/mesh_reader.h"
 
 #include <Eigen/Geometry>
@@ -136,6 +137,22 @@ class Lexer {
     return value;
   }
 
+  // A double-quoted string on the current line (gmsh names: no escapes), without the quotes.
+  std::string string_literal(const std::string& what) {
+    skip_space();
+    token_line_ = line_;
+    if (pos_ >= text_.size()) fail("unexpected end of file, expected " + what);
+    if (text_[pos_] != '"') {
+      std::string_view token;
+      next(token);
+      fail(what + ": expected a name in double quotes, got " + quoted(token));
+    }
+    const size_t start = ++pos_;
+    while (pos_ < text_.size() && text_[pos_] != '"' && text_[pos_] != '\n') ++pos_;
+    if (pos_ >= text_.size() || text_[pos_] != '"') fail(what + ": the closing double quote is missing on this line");
+    return text_.substr(start, pos_++ - start);
+  }
+
   int line() const { return token_line_; }
   const std::string& file() const { return file_; }
 
@@ -179,30 +196,134 @@ class Lexer {
 struct RawMesh {
   std::vector<Vec3> nodes;
   std::vector<int> node_line;                  // line of each node, for messages
+  std::vector<int64_t> node_tag;               // the node's number in the file
+  std::vector<char> mid_edge;                  // TetGen 10-node: referenced as a mid-edge node
   std::vector<std::array<int64_t, 4>> tets;    // node indices into `nodes` (resolved)
   std::vector<int> tet_line;
   std::vector<int64_t> tet_tag;                // the element's number in the file
   int64_t ignored_elements = 0;
+  std::vector<PhysicalName> physical_names;
 };
 
-// Checks the tetrahedra, drops unused nodes, lumps the volumes. Messages name
+// Union-find over the tetrahedra (path halving, union by size).
+struct Parts {
+  explicit Parts(size_t n) : parent(n), size(n, 1) {
+    for (size_t i = 0; i < n; ++i) parent[i] = static_cast<int64_t>(i);
+  }
+  int64_t root(int64_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  }
+  void join(int64_t a, int64_t b) {
+    a = root(a);
+    b = root(b);
+    if (a == b) return;
+    if (size[a] < size[b]) std::swap(a, b);
+    parent[b] = a;
+    size[a] += size[b];
+  }
+  std::vector<int64_t> parent, size;
+};
+
+// Refuses a mesh that is not one part. Faces: each triangle shared by two tetrahedra
+// joins them; one shared by three or more is an overlap. `tets` index kept nodes.
+void check_one_part(const RawMesh& raw, const std::vector<std::array<int64_t, 4>>& tets, const std::string& element_file) {
+  const size_t m = tets.size();
+  struct Face {
+    std::array<int64_t, 3> v;
+    int64_t tet;
+    int64_t opposite;  // the tetrahedron's fourth node
+  };
+  std::vector<Face> faces;
+  faces.reserve(4 * m);
+  for (size_t t = 0; t < m; ++t)
+    for (int skip = 0; skip < 4; ++skip) {
+      Face f{{}, static_cast<int64_t>(t), tets[t][skip]};
+      int k = 0;
+      for (int a = 0; a < 4; ++a)
+        if (a != skip) f.v[k++] = tets[t][a];
+      std::sort(f.v.begin(), f.v.end());
+      faces.push_back(f);
+    }
+  std::sort(faces.begin(), faces.end(), [](const Face& a, const Face& b) { return a.v != b.v ? a.v < b.v : a.tet < b.tet; });
+  Parts by_face(m);
+  for (size_t k = 1; k < faces.size(); ++k) {
+    if (faces[k].v != faces[k - 1].v) continue;
+    if (k >= 2 && faces[k].v == faces[k - 2].v) {
+      const int64_t t0 = faces[k - 2].tet, t1 = faces[k - 1].tet, t2 = faces[k].tet;
+      fail_at(element_file, raw.tet_line[t2],
+              "tetrahedron " + std::to_string(raw.tet_tag[t2]) + " shares a face with tetrahedra " +
+                  std::to_string(raw.tet_tag[t0]) + " (line " + std::to_string(raw.tet_line[t0]) + ") and " +
+                  std::to_string(raw.tet_tag[t1]) + " (line " + std::to_string(raw.tet_line[t1]) +
+                  "): a face bounds at most two tetrahedra (duplicated or overlapping elements)");
+    }
+    if (faces[k].opposite == faces[k - 1].opposite) {
+      const int64_t t0 = faces[k - 1].tet, t1 = faces[k].tet;
+      fail_at(element_file, raw.tet_line[t1],
+              "tetrahedron " + std::to_string(raw.tet_tag[t1]) + " repeats tetrahedron " + std::to_string(raw.tet_tag[t0]) +
+                  " (line " + std::to_string(raw.tet_line[t0]) + "): the same four nodes");
+    }
+    by_face.join(faces[k].tet, faces[k - 1].tet);
+  }
+  const auto tetrahedra = [](int64_t n) { return std::to_string(n) + (n == 1 ? " tetrahedron" : " tetrahedra"); };
+  int64_t parts = 0, largest = -1;
+  for (size_t t = 0; t < m; ++t)
+    if (by_face.root(t) == static_cast<int64_t>(t)) {
+      ++parts;
+      if (largest < 0 || by_face.size[t] > by_face.size[largest]) largest = static_cast<int64_t>(t);
+    }
+  if (parts == 1) return;
+  // The first elements (in file order) of the largest part and outside it.
+  size_t first = 0, first_largest = 0;
+  while (by_face.root(first) == largest) ++first;
+  while (by_face.root(first_largest) != largest) ++first_largest;
+  // Do the parts touch at nodes (a pinch) or not at all?
+  Parts by_node(m);
+  std::vector<int64_t> tet_of_node;
+  {
+    int64_t n = 0;
+    for (const auto& t : tets)
+      for (int64_t v : t) n = std::max(n, v + 1);
+    tet_of_node.assign(n, -1);
+  }
+  for (size_t t = 0; t < m; ++t)
+    for (int64_t v : tets[t]) {
+      if (tet_of_node[v] < 0) tet_of_node[v] = static_cast<int64_t>(t);
+      else by_node.join(tet_of_node[v], static_cast<int64_t>(t));
+    }
+  int64_t node_parts = 0;
+  for (size_t t = 0; t < m; ++t) node_parts += by_node.root(t) == static_cast<int64_t>(t);
+  const std::string how =
+      node_parts == 1        ? "; they touch only at edges or nodes (a pinch: no material joins them)"
+      : node_parts == parts ? ", and no part shares a node with another"
+                            : "; some touch at edges or nodes, " + std::to_string(node_parts) + " groups of them share no node";
+  fail_at(element_file, raw.tet_line[first],
+          "the tetrahedra form " + std::to_string(parts) + " parts joined by no shared face" + how +
+              ": a body must be one part. Tetrahedron " + std::to_string(raw.tet_tag[first]) + " (this line) is in a part of " +
+              tetrahedra(by_face.size[by_face.root(first)]) + ", the largest part has " +
+              std::to_string(by_face.size[largest]) + " (tetrahedron " + std::to_string(raw.tet_tag[first_largest]) +
+              ", line " + std::to_string(raw.tet_line[first_largest]) + "); mesh one volume, or remove the other parts");
+}
+
+// Checks the tetrahedra, drops mid-edge nodes, lumps the volumes. Messages name
 // `node_file` or `element_file` (the same file for gmsh).
 TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& element_file,
                  const std::string& what_if_empty) {
   if (raw.tets.empty()) throw std::runtime_error(element_file + ": " + what_if_empty);
   TetMesh mesh;
   mesh.ignored_elements = raw.ignored_elements;
+  mesh.physical_names = std::move(raw.physical_names);
   const size_t node_count = raw.nodes.size();
   std::vector<double> volume(raw.tets.size());
-  int first_sign = 0;
+  int64_t positive = 0;
   for (size_t t = 0; t < raw.tets.size(); ++t) {
     const auto& tet = raw.tets[t];
     const std::string name = "tetrahedron " + std::to_string(raw.tet_tag[t]);
     for (int a = 0; a < 4; ++a)
       for (int b = a + 1; b < 4; ++b)
         if (tet[a] == tet[b])
-          fail_at(element_file, raw.tet_line[t], name + " uses the node at line " + std::to_string(raw.node_line[tet[a]]) +
-                                           " twice (degenerate)");
+          fail_at(element_file, raw.tet_line[t], name + " uses node " + std::to_string(raw.node_tag[tet[a]]) + " (line " +
+                                                     std::to_string(raw.node_line[tet[a]]) + ") twice (degenerate)");
     const Vec3& x0 = raw.nodes[tet[0]];
     const Vec3 e1 = raw.nodes[tet[1]] - x0, e2 = raw.nodes[tet[2]] - x0, e3 = raw.nodes[tet[3]] - x0;
     const double V = e1.dot(e2.cross(e3)) / 6.0;  // signed volume
@@ -212,20 +333,39 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
     const double L = std::sqrt(L2);
     if (!(std::abs(V) > kDegenerate * L * L * L))
       fail_at(element_file, raw.tet_line[t], name + " is degenerate: volume " + fmt(V) + " m^3 with longest edge " + fmt(L) +
-                                       " m (|V| must exceed 1e-12 L^3)");
-    const int sign = V > 0 ? 1 : -1;
-    if (first_sign == 0) first_sign = sign;
-    if (sign != first_sign)
-      fail_at(element_file, raw.tet_line[t], name + " is inverted: volume " + fmt(V) + " m^3, the opposite sign of the file's first tetrahedron (line " +
-                                       std::to_string(raw.tet_line[0]) + "); the mesh is tangled or inconsistently oriented");
-    volume[t] = std::abs(V);
+                                                 " m (|V| must exceed 1e-12 L^3): its four nodes are (nearly) in one plane");
+    positive += V > 0;
+    volume[t] = V;
   }
-  mesh.reoriented = first_sign < 0;
+  // The file's orientation: the sign most tetrahedra have (ties: gmsh's, positive).
+  const int64_t negative = static_cast<int64_t>(raw.tets.size()) - positive;
+  const bool file_positive = positive >= negative;
+  for (size_t t = 0; t < raw.tets.size(); ++t) {
+    if ((volume[t] > 0) == file_positive) continue;
+    const auto& tet = raw.tets[t];
+    fail_at(element_file, raw.tet_line[t],
+            "tetrahedron " + std::to_string(raw.tet_tag[t]) + " is inverted: signed volume " + fmt(volume[t]) + " m^3 (nodes " +
+                std::to_string(raw.node_tag[tet[0]]) + " " + std::to_string(raw.node_tag[tet[1]]) + " " +
+                std::to_string(raw.node_tag[tet[2]]) + " " + std::to_string(raw.node_tag[tet[3]]) + ": seen from the fourth, the first three turn " +
+                (volume[t] > 0 ? "counterclockwise" : "clockwise") + ") while " +
+                std::to_string(file_positive ? positive : negative) + " of the file's " + std::to_string(raw.tets.size()) +
+                " tetrahedra are " + (file_positive ? "positive" : "negative") +
+                ": the mesh is tangled or this element's nodes are misnumbered (regenerate the mesh, or swap two of its nodes)");
+  }
+  mesh.reoriented = !file_positive;
+  for (double& V : volume) V = std::abs(V);
 
-  // Keep the nodes some tetrahedron uses, in file order.
+  // Every node must be referenced by a tetrahedron; the corners are kept, in file order.
   std::vector<int64_t> new_index(node_count, -1);
   for (const auto& tet : raw.tets)
     for (int64_t v : tet) new_index[v] = 0;
+  raw.mid_edge.resize(node_count, 0);
+  for (size_t i = 0; i < node_count; ++i)
+    if (new_index[i] < 0 && !raw.mid_edge[i])
+      fail_at(node_file, raw.node_line[i],
+              "node " + std::to_string(raw.node_tag[i]) + " is used by no tetrahedron (a geometry point, or a node of "
+              "lower-dimensional elements only): every node must be a vertex of the body's tetrahedra; remove it, or "
+              "regenerate the mesh without free points");
   int64_t kept = 0;
   for (size_t i = 0; i < node_count; ++i)
     if (new_index[i] == 0) new_index[i] = kept++;
@@ -256,12 +396,18 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
                                     fmt(X(0, a)) + ", " + fmt(X(1, a)) + ", " + fmt(X(2, a)) + ")");
     }
 
+  // One body: the tetrahedra connected through shared faces.
+  std::vector<std::array<int64_t, 4>> kept_tets(raw.tets.size());
+  for (size_t t = 0; t < raw.tets.size(); ++t)
+    for (int a = 0; a < 4; ++a) kept_tets[t][a] = new_index[raw.tets[t][a]];
+  check_one_part(raw, kept_tets, element_file);
+
   // Tetrahedra, positively oriented, and the lumped volumes v_i = sum_t |V_t| / 4.
   mesh.tetrahedra.resize(raw.tets.size());
   mesh.nodal_volume.assign(kept, 0.0);
   for (size_t t = 0; t < raw.tets.size(); ++t) {
     std::array<int, 4> tet;
-    for (int a = 0; a < 4; ++a) tet[a] = static_cast<int>(new_index[raw.tets[t][a]]);
+    for (int a = 0; a < 4; ++a) tet[a] = static_cast<int>(kept_tets[t][a]);
     if (mesh.reoriented) std::swap(tet[1], tet[2]);
     mesh.tetrahedra[t] = tet;
     for (int v : tet) mesh.nodal_volume[v] += 0.25 * volume[t];
@@ -338,6 +484,7 @@ void read_nodes_v41(Lexer& lex, RawMesh& raw, NodeTags& tags, int64_t max_nodes)
       const int64_t tag = lex.integer("nodeTag", 1, kMaxTag);
       tags.add(lex, tag, raw);
       raw.nodes.emplace_back(Vec3::Zero());
+      raw.node_tag.push_back(tag);
       raw.node_line.push_back(lex.line());
     }
     for (int64_t k = 0; k < in_block; ++k) {
@@ -360,6 +507,7 @@ void read_nodes_v2(Lexer& lex, RawMesh& raw, NodeTags& tags, int64_t max_nodes) 
   for (int64_t k = 0; k < count; ++k) {
     const int64_t tag = lex.integer("node-number", 1, kMaxTag);
     tags.add(lex, tag, raw);
+    raw.node_tag.push_back(tag);
     raw.nodes.push_back(read_xyz(lex));
     raw.node_line.push_back(lex.line());
     lex.end_of_line("a node's x y z");
@@ -430,6 +578,33 @@ void read_elements_v2(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
   }
 }
 
+// $PhysicalNames (4.1 and 2.2 alike): the count, then "dimension tag \"name\"" per line.
+void read_physical_names(Lexer& lex, RawMesh& raw) {
+  const int64_t count = lex.integer("numPhysicalNames", 0, kMaxTag);
+  lex.end_of_line("the number of physical names");
+  for (int64_t k = 0; k < count; ++k) {
+    PhysicalName p;
+    p.dimension = static_cast<int>(lex.integer("physical name dimension", 0, 3));
+    p.line = lex.line();
+    p.tag = lex.integer("physicalTag", 1, kMaxTag);
+    if (lex.line() != p.line) lex.fail("physicalTag: expected on the line of its dimension");
+    p.name = lex.string_literal("physical name");
+    if (lex.line() != p.line) lex.fail("physical name: expected on the line of its dimension and tag");
+    if (p.name.empty()) lex.fail("physical name: empty (\"\"): a group must be named to be referred to");
+    lex.end_of_line("a physical name");
+    for (const PhysicalName& q : raw.physical_names) {
+      if (q.dimension == p.dimension && q.tag == p.tag)
+        lex.fail("physical group " + std::to_string(p.tag) + " of dimension " + std::to_string(p.dimension) +
+                 " is named twice (" + quoted(std::string_view(q.name)) + " at line " + std::to_string(q.line) + ", " + quoted(std::string_view(p.name)) + " here)");
+      if (q.dimension == p.dimension && q.name == p.name)
+        lex.fail("physical name " + quoted(std::string_view(p.name)) + " is given to two groups of dimension " + std::to_string(p.dimension) +
+                 " (tag " + std::to_string(q.tag) + " at line " + std::to_string(q.line) + ", tag " + std::to_string(p.tag) +
+                 " here): a name must identify one group");
+    }
+    raw.physical_names.push_back(std::move(p));
+  }
+}
+
 // Reads "$End<name>" after a section's content.
 void expect_end(Lexer& lex, std::string_view name) {
   const std::string end = "$End" + std::string(name);
@@ -461,7 +636,7 @@ TetMesh read_gmsh(const fs::path& file, int64_t max_nodes) {
   NodeTags tags;
   std::vector<GmshTet> tets;
   GmshVersion version = GmshVersion::none;
-  bool nodes_seen = false, elements_seen = false;
+  bool nodes_seen = false, elements_seen = false, names_seen = false;
   std::string_view token;
   while (lex.next(token)) {
     if (version == GmshVersion::none && token != "$MeshFormat")
@@ -481,6 +656,11 @@ TetMesh read_gmsh(const fs::path& file, int64_t max_nodes) {
       elements_seen = true;
       if (version == GmshVersion::v41) read_elements_v41(lex, raw, tets);
       else read_elements_v2(lex, raw, tets);
+      expect_end(lex, name);
+    } else if (name == "PhysicalNames") {
+      if (names_seen) lex.fail("a second $PhysicalNames section");
+      names_seen = true;
+      read_physical_names(lex, raw);
       expect_end(lex, name);
     } else {
       skip_section(lex, name);
@@ -540,6 +720,7 @@ TetMesh read_tetgen(const fs::path& node_file, int64_t max_nodes) {
         lex.fail("point index " + std::to_string(index) + " where " + std::to_string(base + k) +
                  " was expected (indices must be consecutive)");
       }
+      raw.node_tag.push_back(index);
       raw.nodes.push_back(read_xyz(lex));
       raw.node_line.push_back(lex.line());
       for (int64_t a = 0; a < attributes; ++a) lex.real("attribute");
@@ -561,6 +742,7 @@ TetMesh read_tetgen(const fs::path& node_file, int64_t max_nodes) {
   if (lex.more_on_line()) attributes = lex.integer("number of region attributes", 0, 1000);
   lex.end_of_line("the .ele header");
   const int64_t node_count = static_cast<int64_t>(raw.nodes.size());
+  raw.mid_edge.assign(raw.nodes.size(), 0);
   for (int64_t k = 0; k < count; ++k) {
     const int64_t tag = lex.integer("tetrahedron index", -kMaxTag, kMaxTag);
     if (lex.line() == header_line) lex.fail("expected the first tetrahedron on a new line");
@@ -571,6 +753,7 @@ TetMesh read_tetgen(const fs::path& node_file, int64_t max_nodes) {
         lex.fail("tetrahedron " + std::to_string(tag) + ": node index " + std::to_string(v) + " is out of range [" +
                  std::to_string(base) + ", " + std::to_string(base + node_count - 1) + "]");
       if (a < 4) nodes[a] = v - base;  // a 10-node tetrahedron's corners come first
+      else raw.mid_edge[v - base] = 1;
     }
     for (int64_t a = 0; a < attributes; ++a) lex.real("region attribute");
     raw.tets.push_back(nodes);
@@ -582,6 +765,18 @@ TetMesh read_tetgen(const fs::path& node_file, int64_t max_nodes) {
   std::string_view extra;
   if (lex.next(extra)) lex.fail("unexpected " + quoted(extra) + " after the " + std::to_string(count) + " tetrahedra");
   return assemble(std::move(raw), node_file.string(), ele_file.string(), "no tetrahedra");
+}
+
+int64_t physical_group_tag(const TetMesh& mesh, const fs::path& file, int dimension, std::string_view name) {
+  std::string known;
+  for (const PhysicalName& p : mesh.physical_names) {
+    if (p.dimension != dimension) continue;
+    if (p.name == name) return p.tag;
+    known += (known.empty() ? "" : ", ") + quoted(std::string_view(p.name));
+  }
+  throw std::runtime_error(file.string() + ": no physical group of dimension " + std::to_string(dimension) + " is named " +
+                           quoted(name) + " (" + (known.empty() ? "the file names none of that dimension" : "the file names " + known) +
+                           ")");
 }
 
 bool known_mesh_extension(const fs::path& file) {

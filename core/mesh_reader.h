@@ -4,10 +4,11 @@
 // give each particle its nodal volume.
 //
 // Formats (the format follows the extension):
-//   .msh   gmsh ASCII, version 4.1 (entity blocks, node tags) or 2.2. Only
-//          4-node tetrahedra (element type 4) are kept; points, lines, triangles
-//          and every other element type are ignored. $PhysicalNames, $Entities
-//          and any other section are skipped. Binary files and version 4.0 are refused.
+//   .msh   gmsh ASCII, version 4.1 (entity blocks, node tags) or 2.2. Only 4-node
+//          tetrahedra (element type 4) are kept; points, lines, triangles and every
+//          other element type are ignored. $PhysicalNames is read (TetMesh::
+//          physical_names); $Entities and any other section are skipped. Binary files
+//          and version 4.0 are refused.
 //   .node  TetGen: the .node file and its sibling .ele (same stem). Indices are
 //          0- or 1-based as the first point of the .node file says; attributes and
 //          boundary markers are read and ignored; '#' starts a comment; 10-node
@@ -17,22 +18,43 @@
 // incident to node i of |V_t| / 4, V_t = det[x_b - x_a, x_c - x_a, x_d - x_a] / 6,
 // so sum_i v_i = sum_t |V_t|, the volume of the meshed body.
 //
-// Orientation: a file's tetrahedra must all have the same orientation (the sign of
-// V_t). gmsh writes them positive; a mirrored mesh, or a generator with the other
-// convention, has them all negative: either is accepted and stored positive (the
-// second and third node swapped). A tetrahedron
-// whose sign differs from the file's first one is inverted (a tangled mesh) and
-// refused, as is a degenerate one (|V_t| <= 1e-12 L^3, L its longest edge).
-//
-// Nodes used by no tetrahedron (gmsh's geometry points, the mid-edge nodes of
-// quadratic elements) are dropped and counted. Every refusal is a
-// std::runtime_error "<file>:<line>: <reason>" (no line when the whole file is
-// concerned): malformed or non-finite numbers, missing sections or counts that do
-// not match, indices out of range, duplicate tags, coincident nodes, degenerate or
-// inverted tetrahedra, more than `max_nodes` nodes.
+// The checks (after reading; each refusal names the element or node by its number
+// in the file and the line that defines it):
+//   degenerate  a tetrahedron with a repeated node or |V_t| <= 1e-12 L^3, L its
+//               longest edge (a regular tetrahedron has 0.118 L^3, a gmsh or TetGen
+//               sliver rarely below 1e-4 L^3; 1e-12 L^3 is a few thousand round-offs
+//               of the determinant, a flat element, not a poor one);
+//   inverted    a tetrahedron whose sign of V_t differs from the file's orientation.
+//               gmsh's convention (its reference tetrahedron (0,0,0), (1,0,0), (0,1,0),
+//               (0,0,1)) is V_t > 0: node d on the side toward which a, b, c turn
+//               counterclockwise. The file's orientation is the sign most of its
+//               tetrahedra have (ties: positive), so a mirrored file or a generator
+//               with the other convention, all negative, is accepted and stored
+//               positive (the second and third node swapped; `reoriented`); an
+//               element of the minority sign is a tangled or misnumbered one;
+//   unused node a node no tetrahedron references (a gmsh geometry point, the nodes
+//               of surface elements of a part not meshed in volume): refused, not
+//               dropped, since it is a particle the file meant to have or a file
+//               that does not describe one body. The mid-edge nodes of a TetGen
+//               10-node .ele are referenced and dropped (counted in `unused_nodes`);
+//   coincident  two kept nodes at the same point (a crack);
+//   overlap     a triangle shared by more than two tetrahedra (duplicated or
+//               overlapping elements);
+//   parts       the tetrahedra must form one part connected through shared faces
+//               (triangles): parts touching only at an edge or a node are refused
+//               too (a pinch, no body in between);
+//   names       $PhysicalNames: each entry "dimension tag \"name\"", dimension 0..3,
+//               tag >= 1, a non-empty name on one line; a (dimension, tag) or a
+//               (dimension, name) given twice is refused.
+// Every refusal is a std::runtime_error "<file>:<line>: <reason>" (no line when the
+// whole file is concerned): malformed or non-finite numbers, missing sections or
+// counts that do not match, indices out of range, duplicate tags, the checks above,
+// more than `max_nodes` nodes.
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/types.h"
@@ -42,15 +64,31 @@ namespace palpate {
 // The largest mesh a scene may name: 200^3 nodes, the largest lattice (per_edge <= 200).
 constexpr int64_t kMaxMeshNodes = 200LL * 200 * 200;
 
+// One $PhysicalNames entry of a gmsh file: the physical group of `dimension` (0 points,
+// 1 curves, 2 surfaces, 3 volumes) numbered `tag`, called `name`.
+struct PhysicalName {
+  int dimension = 0;
+  int64_t tag = 0;
+  std::string name;
+  int line = 0;  // the file line of the entry
+};
+
 struct TetMesh {
   Points positions;                            // 3 x n nodes used by a tetrahedron, in file order, m
   std::vector<std::array<int, 4>> tetrahedra;  // m x 4 indices into positions, V_t > 0
   std::vector<double> nodal_volume;            // n, v_i = sum_t |V_t| / 4 over incident t, m^3
   double total_volume = 0.0;                   // sum_t |V_t| (= sum_i v_i), m^3
-  int64_t unused_nodes = 0;                    // nodes of the file used by no tetrahedron (dropped)
+  int64_t unused_nodes = 0;                    // TetGen 10-node .ele: the mid-edge nodes (dropped); else 0
   int64_t ignored_elements = 0;                // gmsh: elements that are not 4-node tetrahedra
   bool reoriented = false;                     // the file's tetrahedra were negative (now swapped)
+  std::vector<PhysicalName> physical_names;    // gmsh $PhysicalNames in file order (TetGen: none)
 };
+
+// The tag of the physical group of `dimension` named `name` in `mesh` (read from
+// `file`, for the message); an unknown name is a std::runtime_error
+// "<file>: no physical group of dimension D is named 'x' (the file names: ...)".
+int64_t physical_group_tag(const TetMesh& mesh, const std::filesystem::path& file, int dimension,
+                           std::string_view name);
 
 // gmsh .msh (4.1 or 2.2 ASCII).
 TetMesh read_gmsh(const std::filesystem::path& file, int64_t max_nodes = kMaxMeshNodes);

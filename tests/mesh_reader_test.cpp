@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <numeric>
 #include <sstream>
 #include <string>
@@ -27,8 +28,7 @@ const fs::path kData = fs::path(PALPATE_SOURCE_DIR) / "tests" / "data";
 
 // The unit cube as six positively oriented Kuhn tetrahedra around the diagonal from
 // node 1 (0,0,0) to node 8 (1,1,1); node k is the corner with bits k-1 = (x, y, z).
-// Node 20 is a geometry point no tetrahedron uses; a point element and two
-// triangles are ignored.
+// A point element (on node 1) and two triangles are ignored.
 const std::string kGmsh41 = R"($MeshFormat
 4.1 0 8
 $EndMeshFormat
@@ -38,14 +38,11 @@ $PhysicalNames
 $EndPhysicalNames
 $Entities
 1 0 0 1
-1 5 5 5 0
+1 0 0 0 0
 1 0 0 0 1 1 1 1 1 0
 $EndEntities
 $Nodes
-2 9 1 20
-0 1 0 1
-20
-5 5 5
+1 8 1 8
 3 1 0 8
 1
 2
@@ -67,7 +64,7 @@ $EndNodes
 $Elements
 3 9 1 9
 0 1 15 1
-1 20
+1 1
 2 1 2 2
 2 1 2 4
 3 1 4 3
@@ -84,8 +81,13 @@ $EndElements
 const std::string kGmsh22 = R"($MeshFormat
 2.2 0 8
 $EndMeshFormat
+$PhysicalNames
+2
+2 7 "top face"
+3 1 "the cube"
+$EndPhysicalNames
 $Nodes
-9
+8
 1 0 0 0
 2 1 0 0
 3 0 1 0
@@ -94,11 +96,10 @@ $Nodes
 6 1 0 1
 7 0 1 1
 8 1 1 1
-20 5 5 5
 $EndNodes
 $Elements
 9
-1 15 2 0 1 20
+1 15 2 0 1 1
 2 2 2 0 1 1 2 4
 3 4 2 1 1 1 2 4 8
 4 4 2 1 1 1 6 2 8
@@ -180,11 +181,11 @@ void expect_consistent(const TetMesh& m, double box_volume) {
   for (double v : m.nodal_volume) EXPECT_GT(v, 0.0);
 }
 
-TEST_F(MeshFiles, Gmsh41KeepsTheTetrahedraAndDropsTheUnusedNode) {
+TEST_F(MeshFiles, Gmsh41KeepsTheTetrahedra) {
   const TetMesh m = read_gmsh(write("cube.msh", kGmsh41));
   EXPECT_EQ(m.positions.cols(), 8);
   EXPECT_EQ(m.tetrahedra.size(), 6u);
-  EXPECT_EQ(m.unused_nodes, 1);
+  EXPECT_EQ(m.unused_nodes, 0);
   EXPECT_EQ(m.ignored_elements, 3);
   EXPECT_FALSE(m.reoriented);
   expect_consistent(m, 1.0);
@@ -197,7 +198,7 @@ TEST_F(MeshFiles, Gmsh41KeepsTheTetrahedraAndDropsTheUnusedNode) {
 TEST_F(MeshFiles, Gmsh22GivesTheSameMesh) {
   const TetMesh a = read_gmsh(write("a.msh", kGmsh41));
   const TetMesh b = read_gmsh(write("b.msh", kGmsh22));
-  EXPECT_EQ(b.unused_nodes, 1);
+  EXPECT_EQ(b.unused_nodes, 0);
   EXPECT_EQ(b.ignored_elements, 3);
   EXPECT_EQ(a.positions, b.positions);
   EXPECT_EQ(a.nodal_volume, b.nodal_volume);
@@ -237,13 +238,13 @@ std::string tetgen_node(int base) {
   for (int k = 0; k < 8; ++k) s << k + base << "  " << (k & 1) << ' ' << (k >> 1 & 1) << ' ' << (k >> 2 & 1) << '\n';
   return s.str();
 }
-std::string tetgen_ele(int base, bool ten_nodes = false) {
+std::string tetgen_ele(int base, bool ten_nodes = false, bool swap = false) {
   const int tets[6][4] = {{1, 2, 4, 8}, {1, 6, 2, 8}, {1, 4, 3, 8}, {1, 3, 7, 8}, {1, 5, 6, 8}, {1, 7, 5, 8}};
   std::ostringstream s;
   s << "6 " << (ten_nodes ? 10 : 4) << " 0\n";
   for (int t = 0; t < 6; ++t) {
     s << t + base;
-    for (int a = 0; a < 4; ++a) s << ' ' << tets[t][a] - 1 + base;
+    for (int a = 0; a < 4; ++a) s << ' ' << tets[t][swap && (a == 1 || a == 2) ? 3 - a : a] - 1 + base;
     if (ten_nodes)
       for (int a = 0; a < 6; ++a) s << ' ' << tets[t][a % 4] - 1 + base;
     s << '\n';
@@ -302,9 +303,11 @@ TEST_F(MeshFiles, MissingSections) {
   EXPECT_EQ(error_of("m.msh", ""), (dir_ / "m.msh").string() + ": empty file, expected a gmsh mesh");
   EXPECT_EQ(error_of("m.msh", "hello\n"),
             (dir_ / "m.msh").string() + ":1: the file must start with $MeshFormat (is it a gmsh .msh file?), got 'hello'");
-  const std::string unclosed = replace(kGmsh41, "$EndPhysicalNames\n", "");
+  const std::string unclosed = replace(kGmsh41, "$EndEntities\n", "");
   EXPECT_EQ(error_of("m.msh", unclosed),
-            at("m.msh", unclosed, "$PhysicalNames") + "section $PhysicalNames is not closed by $EndPhysicalNames");
+            at("m.msh", unclosed, "$Entities") + "section $Entities is not closed by $EndEntities");
+  const std::string names = replace(kGmsh41, "$EndPhysicalNames\n", "");
+  EXPECT_EQ(error_of("m.msh", names), at("m.msh", names, "$Entities") + "expected $EndPhysicalNames, got '$Entities'");
   const std::string truncated = kGmsh41.substr(0, kGmsh41.find("9 1 7 5 8"));
   EXPECT_TRUE(contains(error_of("m.msh", truncated), "unexpected end of file, expected elementTag"));
 }
@@ -327,13 +330,13 @@ TEST_F(MeshFiles, FormatsThatAreNotRead) {
 }
 
 TEST_F(MeshFiles, CountsThatDoNotMatch) {
-  const std::string nodes = replace(kGmsh41, "2 9 1 20", "2 10 1 20");
-  EXPECT_TRUE(contains(error_of("m.msh", nodes), "the node blocks hold 9 nodes, the $Nodes header says 10"))
+  const std::string nodes = replace(kGmsh41, "1 8 1 8", "1 9 1 8");
+  EXPECT_TRUE(contains(error_of("m.msh", nodes), "the node blocks hold 8 nodes, the $Nodes header says 9"))
       << error_of("m.msh", nodes);
   const std::string elements = replace(kGmsh41, "3 9 1 9", "3 8 1 9");
   EXPECT_TRUE(contains(error_of("m.msh", elements), "the element blocks hold more than the 8 elements the $Elements header declares"))
       << error_of("m.msh", elements);
-  const std::string v2 = replace(kGmsh22, "$Nodes\n9\n", "$Nodes\n10\n");
+  const std::string v2 = replace(kGmsh22, "$Nodes\n8\n", "$Nodes\n9\n");
   EXPECT_TRUE(contains(error_of("m.msh", v2), "node-number: expected an integer, got '$EndNodes'"));
 }
 
@@ -342,7 +345,8 @@ TEST_F(MeshFiles, IndicesOutOfRangeAndDuplicateTags) {
   EXPECT_EQ(error_of("m.msh", unknown), at("m.msh", unknown, "9 1 7 5 9") + "tetrahedron 9: node tag 9 is not in $Nodes");
   const std::string duplicate = replace(kGmsh22, "8 1 1 1", "2 1 1 1");
   EXPECT_EQ(error_of("m.msh", duplicate),
-            at("m.msh", duplicate, "2 1 1 1") + "node tag 2 appears twice (first at line 7)");
+            at("m.msh", duplicate, "2 1 1 1") + "node tag 2 appears twice (first at line " +
+                std::to_string(line_of(duplicate, "2 1 0 0")) + ")");
   const std::string ele = replace(tetgen_ele(1), "6 1 7 5 8", "6 1 7 5 9");
   EXPECT_EQ(error_of("c.node", tetgen_node(1), ele),
             at("c.ele", ele, "6 1 7 5 9") + "tetrahedron 6: node index 9 is out of range [1, 8]");
@@ -355,20 +359,179 @@ TEST_F(MeshFiles, DegenerateTetrahedra) {
   // coincide with 4: move it to z = 0 beside the cube instead).
   const std::string repeated = replace(kGmsh22, "3 4 2 1 1 1 2 4 8", "3 4 2 1 1 1 2 4 4");
   EXPECT_EQ(error_of("m.msh", repeated),
-            at("m.msh", repeated, "1 2 4 4") + "tetrahedron 3 uses the node at line 9 twice (degenerate)");
+            at("m.msh", repeated, "1 2 4 4") + "tetrahedron 3 uses node 4 (line " +
+                std::to_string(line_of(repeated, "4 1 1 0")) + ") twice (degenerate)");
   const std::string node = "5 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 2 2 0\n";
   const std::string ele = "2 4 0\n1 1 2 3 4\n2 1 2 3 5\n";
   EXPECT_EQ(error_of("flat.node", node, ele),
             (dir_ / "flat.ele").string() + ":3: tetrahedron 2 is degenerate: volume 0 m^3 with longest edge 2.82843 m "
-                                           "(|V| must exceed 1e-12 L^3)");
+                                           "(|V| must exceed 1e-12 L^3): its four nodes are (nearly) in one plane");
+}
+
+// The tolerance is relative: 1e-12 L^3 refuses a flat element at any scale and keeps a
+// good one however small. One tetrahedron (0,0,0), (1,0,0), (0,1,0), (0.3, 0.3, h),
+// scaled by s: V = s^3 h / 6, L = s sqrt(2), so it is refused for h <= 6e-12 * 2^1.5 = 1.7e-11.
+TEST_F(MeshFiles, TheDegenerateToleranceIsRelativeToTheEdgeLength) {
+  const auto one = [&](double s, double h) {
+    std::ostringstream node;
+    node.precision(17);
+    node << "4 3 0 0\n1 0 0 0\n2 " << s << " 0 0\n3 0 " << s << " 0\n4 " << 0.3 * s << ' ' << 0.3 * s << ' ' << s * h << '\n';
+    return error_of("t.node", node.str(), "1 4 0\n1 1 2 3 4\n");
+  };
+  for (double s : {1e-6, 1.0, 1e3}) {
+    EXPECT_EQ(one(s, 1e-9), "") << s;
+    EXPECT_EQ(one(s, 2e-11), "") << s;
+    EXPECT_TRUE(contains(one(s, 1.5e-11), "t.ele:2: tetrahedron 1 is degenerate")) << s << ": " << one(s, 1.5e-11);
+  }
+  // A cube of 1 um edge (a far smaller mesh than any absolute tolerance would allow).
+  std::string node = "8 3 0 0\n";
+  for (int k = 0; k < 8; ++k)
+    node += std::to_string(k + 1) + " " + (k & 1 ? "1e-6" : "0") + " " + (k >> 1 & 1 ? "1e-6" : "0") + " " +
+            (k >> 2 & 1 ? "1e-6" : "0") + "\n";
+  write("micro.ele", tetgen_ele(1));
+  expect_consistent(read_tetgen(write("micro.node", node)), 1e-18);
 }
 
 TEST_F(MeshFiles, InvertedTetrahedron) {
   const std::string text = replace(kGmsh41, "9 1 7 5 8", "9 1 5 7 8");
   EXPECT_EQ(error_of("m.msh", text),
             at("m.msh", text, "9 1 5 7 8") +
-                "tetrahedron 9 is inverted: volume -0.166667 m^3, the opposite sign of the file's first tetrahedron "
-                "(line " + std::to_string(line_of(text, "4 1 2 4 8")) + "); the mesh is tangled or inconsistently oriented");
+                "tetrahedron 9 is inverted: signed volume -0.166667 m^3 (nodes 1 5 7 8: seen from the fourth, the first "
+                "three turn clockwise) while 5 of the file's 6 tetrahedra are positive: the mesh is tangled or this "
+                "element's nodes are misnumbered (regenerate the mesh, or swap two of its nodes)");
+  // The first tetrahedron inverted: the file's orientation is its majority's, so the
+  // message names that element, not the five others.
+  const std::string first = replace(kGmsh22, "3 4 2 1 1 1 2 4 8", "3 4 2 1 1 2 1 4 8");
+  EXPECT_TRUE(contains(error_of("m.msh", first), at("m.msh", first, "2 1 4 8") + "tetrahedron 3 is inverted"))
+      << error_of("m.msh", first);
+}
+
+// A mirrored file (all tetrahedra negative) is accepted; one positive element in it is
+// the inverted one.
+TEST_F(MeshFiles, InvertedInANegativelyOrientedFile) {
+  const std::string mirrored = tetgen_ele(1, false, /*swap=*/true);
+  write("mirror.ele", mirrored);
+  const TetMesh mirror = read_tetgen(write("mirror.node", tetgen_node(1)));
+  EXPECT_TRUE(mirror.reoriented);
+  expect_consistent(mirror, 1.0);
+  const std::string one_positive = replace(mirrored, "2 1 2 6 8", "2 1 6 2 8");
+  EXPECT_EQ(error_of("c.node", tetgen_node(1), one_positive),
+            at("c.ele", one_positive, "2 1 6 2 8") +
+                "tetrahedron 2 is inverted: signed volume 0.166667 m^3 (nodes 1 6 2 8: seen from the fourth, the first "
+                "three turn counterclockwise) while 5 of the file's 6 tetrahedra are negative: the mesh is tangled or "
+                "this element's nodes are misnumbered (regenerate the mesh, or swap two of its nodes)");
+}
+
+// A node no tetrahedron references is refused, named by its number and line: a gmsh
+// geometry point (4.1 and 2.2), a TetGen point.
+TEST_F(MeshFiles, UnusedNodes) {
+  const std::string v41 = replace(replace(kGmsh41, "1 8 1 8\n", "2 9 1 20\n0 1 0 1\n20\n5 5 5\n"), "1 1\n2 1 2 2", "1 20\n2 1 2 2");
+  const std::string reason =
+      " is used by no tetrahedron (a geometry point, or a node of lower-dimensional elements only): every node "
+      "must be a vertex of the body's tetrahedra; remove it, or regenerate the mesh without free points";
+  EXPECT_EQ(error_of("m.msh", v41), at("m.msh", v41, "5 5 5") + "node 20" + reason);
+  const std::string v22 = replace(replace(kGmsh22, "$Nodes\n8\n", "$Nodes\n9\n"), "8 1 1 1\n", "8 1 1 1\n20 5 5 5\n");
+  EXPECT_EQ(error_of("m.msh", v22), at("m.msh", v22, "20 5 5 5") + "node 20" + reason);
+  // A node of the triangles only (node 4 dropped from the tetrahedra by remeshing them
+  // around a new centre would do; here: a triangle on a node of its own).
+  const std::string tri = replace(replace(kGmsh22, "$Nodes\n8\n", "$Nodes\n9\n"), "8 1 1 1\n", "8 1 1 1\n9 2 2 2\n");
+  EXPECT_EQ(error_of("m.msh", replace(tri, "9 2 2 0 1 1 4 3", "9 2 2 0 1 1 4 9")),
+            at("m.msh", tri, "9 2 2 2") + "node 9" + reason);
+  const std::string node = replace(tetgen_node(0), "8 3 0 0", "9 3 0 0") + "8  3 3 3\n";
+  EXPECT_EQ(error_of("c.node", node, tetgen_ele(0)), (dir_ / "c.node").string() + ":10: node 8" + reason);
+}
+
+// A 10-node TetGen element: its six mid-edge nodes are referenced, dropped and counted.
+TEST_F(MeshFiles, TenNodeMidEdgeNodesAreDropped) {
+  const std::string node =
+      "10 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 0.5 0 0\n6 0.5 0.5 0\n7 0 0.5 0\n8 0 0 0.5\n9 0.5 0 0.5\n10 0 0.5 0.5\n";
+  write("q.ele", "1 10 0\n1 1 2 3 4 5 6 7 8 9 10\n");
+  const TetMesh m = read_tetgen(write("q.node", node));
+  EXPECT_EQ(m.positions.cols(), 4);
+  EXPECT_EQ(m.unused_nodes, 6);
+  expect_consistent(m, 1.0 / 6);
+  // ... but a node referenced by nothing is refused there too.
+  EXPECT_TRUE(contains(error_of("r.node", replace(node, "10 3 0 0", "11 3 0 0") + "11 1 1 1\n", "1 10 0\n1 1 2 3 4 5 6 7 8 9 10\n"),
+                       "r.node:12: node 11 is used by no tetrahedron"));
+}
+
+// Two unit cubes side by side as TetGen text: `gap` m apart along x (0: sharing a face).
+std::string two_cubes_node(double gap) {
+  std::ostringstream s;
+  s << "16 3 0 0\n";
+  for (int c = 0; c < 2; ++c)
+    for (int k = 0; k < 8; ++k)
+      s << 8 * c + k + 1 << "  " << (k & 1) + c * (1 + gap) << ' ' << (k >> 1 & 1) << ' ' << (k >> 2 & 1) << '\n';
+  return s.str();
+}
+
+TEST_F(MeshFiles, DisconnectedParts) {
+  // Two separate cubes: 12 tetrahedra in two parts of six.
+  const int tets[6][4] = {{1, 2, 4, 8}, {1, 6, 2, 8}, {1, 4, 3, 8}, {1, 3, 7, 8}, {1, 5, 6, 8}, {1, 7, 5, 8}};
+  std::ostringstream apart_ele;
+  apart_ele << "12 4 0\n";
+  for (int c = 0; c < 2; ++c)
+    for (int t = 0; t < 6; ++t) {
+      apart_ele << 6 * c + t + 1;
+      for (int a = 0; a < 4; ++a) apart_ele << ' ' << tets[t][a] + 8 * c;
+      apart_ele << '\n';
+    }
+  const std::string ele = apart_ele.str();
+  const std::string apart = error_of("c.node", two_cubes_node(0.5), ele);
+  EXPECT_EQ(apart, (dir_ / "c.ele").string() +
+                       ":8: the tetrahedra form 2 parts joined by no shared face, and no part shares a node with another: "
+                       "a body must be one part. Tetrahedron 7 (this line) is in a part of 6 tetrahedra, the largest part "
+                       "has 6 (tetrahedron 1, line 2); mesh one volume, or remove the other parts");
+  // A single tetrahedron beside the cube, touching it at the corner (1, 1, 1) only (a pinch).
+  const std::string pinch_node = tetgen_node(1).replace(0, 1, "11") + "9  2 1 1\n10 1 2 1\n11 1 1 2\n";
+  const std::string pinch_ele = replace(tetgen_ele(1), "6 4 0", "7 4 0") + "7 8 9 10 11\n";
+  const std::string pinch = error_of("p.node", pinch_node, pinch_ele);
+  EXPECT_EQ(pinch, (dir_ / "p.ele").string() +
+                       ":8: the tetrahedra form 2 parts joined by no shared face; they touch only at edges or nodes (a "
+                       "pinch: no material joins them): a body must be one part. Tetrahedron 7 (this line) is in a part "
+                       "of 1 tetrahedron, the largest part has 6 (tetrahedron 1, line 2); mesh one volume, or remove the "
+                       "other parts");
+  // The control: the second cube against the first, sharing its face x = 1 (the mirror
+  // image of the first in x = 1, so the face's diagonals match; the mirrored tetrahedra
+  // list their second and third nodes swapped to stay positive) is one body of 2 m^3.
+  std::ostringstream shared_node, shared_ele;
+  shared_node << "12 3 0 0\n";
+  for (int k = 0; k < 8; ++k) shared_node << k + 1 << ' ' << (k & 1) << ' ' << (k >> 1 & 1) << ' ' << (k >> 2 & 1) << '\n';
+  for (int k = 0; k < 4; ++k) shared_node << 9 + k << " 2 " << (k & 1) << ' ' << (k >> 1 & 1) << '\n';
+  shared_ele << "12 4 0\n";
+  for (int t = 0; t < 6; ++t) {
+    shared_ele << t + 1;
+    for (int a = 0; a < 4; ++a) shared_ele << ' ' << tets[t][a];
+    shared_ele << '\n' << t + 7;
+    for (int a : {0, 2, 1, 3}) {
+      const int k = tets[t][a] - 1;  // mirrored in x = 1: the x = 0 corners go to x = 2
+      shared_ele << ' ' << (k & 1 ? k + 1 : 9 + (k >> 1));
+    }
+    shared_ele << '\n';
+  }
+  write("two.ele", shared_ele.str());
+  const TetMesh two = read_tetgen(write("two.node", shared_node.str()));
+  EXPECT_EQ(two.positions.cols(), 12);
+  EXPECT_FALSE(two.reoriented);
+  expect_consistent(two, 2.0);
+}
+
+// Duplicated or overlapping tetrahedra: a face bounds at most two.
+TEST_F(MeshFiles, OverlappingTetrahedra) {
+  // Node 9 below the cube's interior face (1, 2, 8), which tetrahedra 3 and 4 share.
+  const std::string text =
+      replace(replace(replace(kGmsh22, "$Elements\n9\n", "$Elements\n10\n"), "$EndElements", "10 4 2 1 1 1 2 8 9\n$EndElements"),
+              "$Nodes\n8\n", "$Nodes\n9\n") ;
+  const std::string with_node = replace(text, "8 1 1 1\n", "8 1 1 1\n9 0.5 -1 0.5\n");
+  EXPECT_EQ(error_of("m.msh", with_node),
+            at("m.msh", with_node, "10 4 2 1 1 1 2 8 9") +
+                "tetrahedron 10 shares a face with tetrahedra 3 (line " + std::to_string(line_of(with_node, "3 4 2 1 1 1 2 4 8")) +
+                ") and 4 (line " + std::to_string(line_of(with_node, "4 4 2 1 1 1 6 2 8")) +
+                "): a face bounds at most two tetrahedra (duplicated or overlapping elements)");
+  // A repeated tetrahedron (here the mesh's only other one: no face has three).
+  const std::string node = "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n";
+  EXPECT_EQ(error_of("d.node", node, "2 4 0\n1 1 2 3 4\n2 2 3 1 4\n"),
+            (dir_ / "d.ele").string() + ":3: tetrahedron 2 repeats tetrahedron 1 (line 2): the same four nodes");
 }
 
 TEST_F(MeshFiles, CoincidentNodes) {
@@ -379,7 +542,7 @@ TEST_F(MeshFiles, CoincidentNodes) {
 }
 
 TEST_F(MeshFiles, TooManyNodes) {
-  EXPECT_EQ(error_of("m.msh", kGmsh41, "", 8), at("m.msh", kGmsh41, "2 9 1 20") + "9 nodes exceed the limit of 8");
+  EXPECT_EQ(error_of("m.msh", kGmsh41, "", 7), at("m.msh", kGmsh41, "1 8 1 8") + "8 nodes exceed the limit of 7");
   EXPECT_EQ(error_of("c.node", tetgen_node(1), tetgen_ele(1), 7), (dir_ / "c.node").string() + ":1: 8 nodes exceed the limit of 7");
 }
 
@@ -406,9 +569,81 @@ TEST_F(MeshFiles, TetGenStructure) {
   }
 }
 
+// $PhysicalNames: read in 4.1 and 2.2 (names with spaces), looked up by dimension and name.
+TEST_F(MeshFiles, PhysicalNames) {
+  const fs::path v41 = write("a.msh", kGmsh41);
+  const TetMesh a = read_gmsh(v41);
+  ASSERT_EQ(a.physical_names.size(), 1u);
+  EXPECT_EQ(a.physical_names[0].dimension, 3);
+  EXPECT_EQ(a.physical_names[0].tag, 1);
+  EXPECT_EQ(a.physical_names[0].name, "the cube");
+  EXPECT_EQ(a.physical_names[0].line, line_of(kGmsh41, "3 1 \"the cube\""));
+  const fs::path v22 = write("b.msh", kGmsh22);
+  const TetMesh b = read_gmsh(v22);
+  ASSERT_EQ(b.physical_names.size(), 2u);
+  EXPECT_EQ(physical_group_tag(b, v22, 2, "top face"), 7);
+  EXPECT_EQ(physical_group_tag(b, v22, 3, "the cube"), 1);
+  write("c.ele", tetgen_ele(1));
+  EXPECT_TRUE(read_tetgen(write("c.node", tetgen_node(1))).physical_names.empty());
+  // Unknown names (or a known name at another dimension).
+  try {
+    physical_group_tag(b, v22, 2, "the cube");
+    ADD_FAILURE() << "found";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), v22.string() + ": no physical group of dimension 2 is named 'the cube' (the file names 'top face')");
+  }
+  try {
+    physical_group_tag(b, v22, 1, "edge");
+    ADD_FAILURE() << "found";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), v22.string() + ": no physical group of dimension 1 is named 'edge' (the file names none of that dimension)");
+  }
+}
+
+TEST_F(MeshFiles, PhysicalNamesThatAreRefused) {
+  const auto names = [](const std::string& entries) {
+    return replace(kGmsh22, "2\n2 7 \"top face\"\n3 1 \"the cube\"\n", entries);
+  };
+  const auto check = [&](const std::string& entries, const std::string& part, const std::string& reason) {
+    const std::string text = names(entries);
+    EXPECT_EQ(error_of("m.msh", text), at("m.msh", text, part) + reason) << entries;
+  };
+  check("2\n2 7 \"top\"\n2 7 \"bottom\"\n", "2 7 \"bottom\"",
+        "physical group 7 of dimension 2 is named twice ('top' at line 6, 'bottom' here)");
+  check("2\n2 7 \"top\"\n2 8 \"top\"\n", "2 8 \"top\"",
+        "physical name 'top' is given to two groups of dimension 2 (tag 7 at line 6, tag 8 here): a name must identify one group");
+  check("1\n2 7 top\n", "2 7 top", "physical name: expected a name in double quotes, got 'top'");
+  check("1\n2 7 \"top\n", "2 7 \"top", "physical name: the closing double quote is missing on this line");
+  check("1\n2 7 \"\"\n", "2 7 \"\"", "physical name: empty (\"\"): a group must be named to be referred to");
+  check("1\n4 7 \"top\"\n", "4 7", "physical name dimension: must be in [0, 3], got 4");
+  check("1\n2 0 \"top\"\n", "2 0 \"", "physicalTag: must be in [1, " + std::to_string(std::numeric_limits<int64_t>::max() / 2) + "], got 0");
+  check("1\n2 7 \"top\" 5\n", "2 7 \"top\" 5", "unexpected '5' after a physical name");
+  check("1\n2 7\n\"top\"\n", "\"top\"", "physical name: expected on the line of its dimension and tag");
+  check("3\n2 7 \"top\"\n", "$EndPhysicalNames", "physical name dimension: expected an integer, got '$EndPhysicalNames'");
+  const std::string twice = kGmsh41 + "$PhysicalNames\n0\n$EndPhysicalNames\n";
+  EXPECT_EQ(error_of("m.msh", twice), (dir_ / "m.msh").string() + ":" + std::to_string(line_of(twice, "$EndElements") + 1) +
+                                          ": a second $PhysicalNames section");
+}
+
+// Every shipped mesh passes the checks (and the committed test meshes).
+TEST(MeshData, TheShippedMeshesPassTheChecks) {
+  int count = 0;
+  for (const fs::path& dir : {fs::path(PALPATE_SOURCE_DIR) / "scenes" / "meshes", kData})
+    for (const auto& entry : fs::directory_iterator(dir)) {
+      if (!known_mesh_extension(entry.path())) continue;
+      SCOPED_TRACE(entry.path().string());
+      const TetMesh m = read_mesh(entry.path());
+      EXPECT_EQ(m.unused_nodes, 0);
+      EXPECT_GT(m.total_volume, 0.0);
+      EXPECT_EQ(declared_mesh_nodes(entry.path()), m.positions.cols());
+      ++count;
+    }
+  EXPECT_GE(count, 6);  // 3 scenes/meshes, 2 gmsh and 1 TetGen in tests/data
+}
+
 TEST_F(MeshFiles, DeclaredNodeCountIsReadFromTheHeader) {
-  EXPECT_EQ(declared_mesh_nodes(write("a.msh", kGmsh41)), 9);
-  EXPECT_EQ(declared_mesh_nodes(write("b.msh", kGmsh22)), 9);
+  EXPECT_EQ(declared_mesh_nodes(write("a.msh", kGmsh41)), 8);
+  EXPECT_EQ(declared_mesh_nodes(write("b.msh", kGmsh22)), 8);
   EXPECT_EQ(declared_mesh_nodes(write("c.node", "# comment\n123456789 3 0 0\n")), 123456789);
   EXPECT_THROW(declared_mesh_nodes(write("d.msh", "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n")), std::runtime_error);
 }
