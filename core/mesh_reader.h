@@ -21,9 +21,12 @@
 // The checks (after reading; each refusal names the element or node by its number
 // in the file and the line that defines it):
 //   degenerate  a tetrahedron with a repeated node or |V_t| <= 1e-12 L^3, L its
-//               longest edge (a regular tetrahedron has 0.118 L^3, a gmsh or TetGen
-//               sliver rarely below 1e-4 L^3; 1e-12 L^3 is a few thousand round-offs
-//               of the determinant, a flat element, not a poor one);
+//               longest edge. Relative to L^3 so that the rule does not depend on the
+//               units or the mesh size. A regular tetrahedron has 0.118 L^3; the worst
+//               element of the shipped gmsh meshes has 0.014 L^3. 1e-12 L^3 is about
+//               4500 round-offs (2.2e-16 L^3) of the determinant, so for coordinates
+//               up to ~1000 L from the origin it refuses only elements whose volume is
+//               lost in round-off (four nodes in one plane), never a merely poor one;
 //   inverted    a tetrahedron whose sign of V_t differs from the file's orientation.
 //               gmsh's convention (its reference tetrahedron (0,0,0), (1,0,0), (0,1,0),
 //               (0,0,1)) is V_t > 0: node d on the side toward which a, b, c turn

@@ -3,8 +3,12 @@
 // = TetGen (the rest is the .node text, a NUL byte, then the .ele text). The input
 // is written to private temporary files (the readers take paths). The contract: a
 // mesh whose positions are finite, whose tetrahedra index its nodes and are
-// positively oriented, whose nodal volumes are positive and sum to its volume,
-// and whose header declares at least its nodes; or a std::runtime_error.
+// positively oriented, whose nodes are all used, whose nodal volumes are positive
+// and sum to its volume, whose header declares at least its nodes, and whose
+// physical names are well formed, unique and found by physical_group_tag; or a
+// std::runtime_error. The seeds (corpus/mesh_reader_fuzz/) include a mesh for each
+// refusal of the checks: inverted, degenerate, unused node, two parts, a pinch,
+// an overlap, duplicate physical names.
 #include <unistd.h>
 
 #include <Eigen/Geometry>
@@ -16,6 +20,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/mesh_reader.h"
 
@@ -61,6 +66,30 @@ void check(const palpate::TetMesh& m, int64_t declared) {
     if (!(V > 0)) std::abort();
   }
   if (!(std::abs(sum - m.total_volume) <= 1e-9 * m.total_volume)) std::abort();
+  // Every kept node is a corner of some tetrahedron.
+  std::vector<char> used(n, 0);
+  for (const auto& t : m.tetrahedra)
+    for (int v : t) used[v] = 1;
+  for (char u : used)
+    if (!u) std::abort();
+}
+
+// The names: dimension 0..3, tag >= 1, non-empty, each (dimension, name) found.
+void check_names(const palpate::TetMesh& m, const std::string& file) {
+  for (const palpate::PhysicalName& p : m.physical_names) {
+    if (p.dimension < 0 || p.dimension > 3 || p.tag < 1 || p.name.empty() || p.line < 1) std::abort();
+    try {
+      if (palpate::physical_group_tag(m, file, p.dimension, p.name) != p.tag) std::abort();
+    } catch (const std::runtime_error&) {
+      std::abort();
+    }
+  }
+  // A name no group can have (names end at a double quote) is refused.
+  try {
+    palpate::physical_group_tag(m, file, 2, "no \"such\" group");
+    std::abort();
+  } catch (const std::runtime_error&) {
+  }
 }
 
 }  // namespace
@@ -94,5 +123,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     std::abort();
   }
   check(mesh, declared);
+  check_names(mesh, file);
   return 0;
 }
