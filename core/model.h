@@ -97,7 +97,7 @@ struct Model {
   double max_spacing = 0.0;       // largest nearest-neighbour distance (FEM: element edge), m
   double wave_speed = 0.0;        // p-wave speed sqrt((lambda + 2 mu) / rho), m/s
   int64_t mesh_tetrahedra = 0;    // mesh clouds: tetrahedra read (0 otherwise)
-  int64_t mesh_unused_nodes = 0;  // mesh clouds: nodes of the file used by no tetrahedron, dropped
+  int64_t mesh_unused_nodes = 0;  // mesh clouds: TetGen mid-edge nodes dropped (other unused nodes are refused)
   // Integration constraint sum_i v_i g_ij = 0 at interior particles (MLS only):
   // max residual relative to the mean |v_i g_ij|, of the plain MLS weights and of
   // the weights in use (equal unless mls.integration is "consistent").

@@ -17,7 +17,7 @@ struct NodeCloud {
   // Tetrahedral meshes only (else empty / 0): v_i = a quarter of each incident tetrahedron.
   std::vector<double> mesh_volume;    // n, m^3
   int64_t mesh_tetrahedra = 0;        // tetrahedra of the mesh
-  int64_t mesh_unused_nodes = 0;      // nodes of the file used by no tetrahedron (dropped)
+  int64_t mesh_unused_nodes = 0;      // TetGen mid-edge nodes dropped (other unused nodes are refused: mesh_reader.h)
 };
 
 // Regular lattice with `per_axis` nodes along each box axis, corners included.
