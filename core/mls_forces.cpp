@@ -139,6 +139,47 @@ inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& 
   return (2 * mu) * (dF - dR) + (lambda * A.trace()) * R + (lambda * (U.trace() - 3.0)) * dR;
 }
 
+// Compressible neo-Hookean law (1.13): psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2,
+// I1 = tr(F^T F), J = det F; P = mu (F - F^-T) + lambda ln J F^-T (1.14). F^-T = cof F / J.
+// The energy grows without bound as J -> 0+, and is +infinity for J <= 0 (an inverted or
+// flattened particle). There the returned stress is the finite extension
+// P = mu F + c cof F with the constant c = (lambda ln J_min - mu) / J_min of the law at
+// J_min = kNeoHookeanMinJ: no NaN, and a force that pushes the particle back towards positive
+// volume; the health check reports the inversion (inverted_particle) as for the other laws.
+// inverse_transpose receives F^-T for the tangent (or cof F / J_min at J <= 0).
+constexpr double kNeoHookeanMinJ = 1e-2;
+inline double neo_hookean_stress(const Mat3& F, double lambda, double mu, Mat3& P, Mat3& inverse_transpose) {
+  const Mat3 C = cofactor(F);
+  const double J = F.col(0).dot(C.col(0));
+  if (!(J > 0)) {
+    const double c = (lambda * std::log(kNeoHookeanMinJ) - mu) / kNeoHookeanMinJ;
+    inverse_transpose = C / kNeoHookeanMinJ;
+    P = mu * F + c * C;
+    return HUGE_VAL;
+  }
+  const double log_J = std::log(J);
+  inverse_transpose = C / J;
+  P = mu * F + (lambda * log_J - mu) * inverse_transpose;
+  return 0.5 * mu * (F.squaredNorm() - 3.0) - mu * log_J + 0.5 * lambda * log_J * log_J;
+}
+
+// Its differential along dF (1.15), with G = F^-T:
+// dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G  (G : dF = tr(F^-1 dF)).
+// At J <= 0, the differential of the finite extension: dP = mu dF + c d cof F.
+inline Mat3 neo_hookean_differential(const Mat3& F, const Mat3& G, const Mat3& dF, double lambda, double mu) {
+  const double J = F.determinant();
+  if (!(J > 0)) {
+    const double c = (lambda * std::log(kNeoHookeanMinJ) - mu) / kNeoHookeanMinJ;
+    Mat3 dC;
+    dC.col(0) = dF.col(1).cross(F.col(2)) + F.col(1).cross(dF.col(2));
+    dC.col(1) = dF.col(2).cross(F.col(0)) + F.col(2).cross(dF.col(0));
+    dC.col(2) = dF.col(0).cross(F.col(1)) + F.col(0).cross(dF.col(1));
+    return mu * dF + c * dC;
+  }
+  const double log_J = std::log(J);
+  return mu * dF + (mu - lambda * log_J) * (G * dF.transpose() * G) + (lambda * (G.array() * dF.array()).sum()) * G;
+}
+
 // Differential of the volume term's stress k_v (J - 1) cof F along dF:
 // k_v [(cof F : dF) cof F + (J - 1) d cof F], d cof F from the columns crossed pairwise.
 inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volume_stiffness) {
@@ -152,8 +193,8 @@ inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volum
 }
 
 // First Piola stress P of particle i (elastic + volume term) and its energy density.
-// S_out receives what the tangent needs: S (St Venant-Kirchhoff) or R (corotational);
-// the linear law needs nothing (I).
+// S_out receives what the tangent needs: S (St Venant-Kirchhoff), R (corotational) or
+// F^-T (neo-Hookean); the linear law needs nothing (I).
 inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out = nullptr) {
   Mat3 S = Mat3::Identity();
   double psi = 0;
@@ -163,6 +204,9 @@ inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out =
       break;
     case MaterialLaw::linear:
       psi = linear_stress(F, m.lame_lambda, m.lame_mu, P);
+      break;
+    case MaterialLaw::neo_hookean:
+      psi = neo_hookean_stress(F, m.lame_lambda, m.lame_mu, P, S);
       break;
     case MaterialLaw::stvk:
       psi = stvk_stress(F, m.lame_lambda, m.lame_mu, S);
@@ -185,6 +229,9 @@ inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, con
   switch (m.law) {
     case MaterialLaw::corotational:  // S holds R
       dP = corotational_differential(F, S, dF, m.lame_lambda, m.lame_mu);
+      break;
+    case MaterialLaw::neo_hookean:  // S holds F^-T
+      dP = neo_hookean_differential(F, S, dF, m.lame_lambda, m.lame_mu);
       break;
     case MaterialLaw::linear:  // dP = 2 mu sym(dF) + lambda tr(dF) I
       dP = m.lame_mu * (dF + dF.transpose());
@@ -587,7 +634,7 @@ void force_differential_blocked(const Model& m, const double* tangent_F, const d
     Mat3Lanes F, S, vdP;
     gather_matrices(tangent_F, i, F);
     gather_matrices(tangent_S_or_R, i, S);
-    if (m.law != MaterialLaw::stvk)  // S holds R for the corotational law
+    if (m.law != MaterialLaw::stvk)  // S holds R (corotational) or F^-T (neo-Hookean)
       weighted_differential_per_lane(m, F, S, dF, load(block.volume), vdP);
     else
       weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
@@ -645,7 +692,7 @@ void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
     Mat3 P, S;
-    piola_stress(m, F, P, &S);  // S, or R for the corotational law
+    piola_stress(m, F, P, &S);  // S, or R (corotational), or F^-T (neo-Hookean)
     Eigen::Map<Mat3> F_out(&tangent_F[9 * static_cast<size_t>(i)]), S_out(&tangent_S_or_R[9 * static_cast<size_t>(i)]);
     F_out = F;
     S_out = S;
