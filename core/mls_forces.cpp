@@ -467,6 +467,20 @@ PALPATE_INLINE void weighted_piola_stress(const Model& m, const Mat3Lanes& F, co
   if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
 }
 
+// dP += the volume term's differential k_v [(cof F : dF) cof F + (J - 1) d cof F].
+PALPATE_INLINE void add_volume_term_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& dF, Mat3Lanes& dP) {
+  Mat3Lanes C, dC = {};  // cof F and its differential
+  cofactor_lanes(F, C);
+  add_crossed_columns(dF, F, dC);
+  add_crossed_columns(F, dF, dC);
+  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  Lanes C_dF = C.m[0] * dF.m[0];
+  PALPATE_UNROLL
+  for (int k = 1; k < 9; ++k) C_dF += C.m[k] * dF.m[k];
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) dP.m[k] += m.volume_stiffness * (C_dF * C.m[k] + (J - 1.0) * dC.m[k]);
+}
+
 // v_i dP_i, the differential of weighted_piola_stress at (F_i, S_i) along dF_i:
 // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS, and for the
 // volume term k_v [(cof F : dF) cof F + (J - 1) d cof F].
@@ -493,18 +507,7 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
     for (int c = 0; c < 3; ++c)
       dP(r, c) = dF(r, 0) * S(0, c) + dF(r, 1) * S(1, c) + dF(r, 2) * S(2, c) + F(r, 0) * dS(0, c) +
                  F(r, 1) * dS(1, c) + F(r, 2) * dS(2, c);
-  if constexpr (volume_term) {
-    Mat3Lanes C, dC = {};  // cof F and its differential
-    cofactor_lanes(F, C);
-    add_crossed_columns(dF, F, dC);
-    add_crossed_columns(F, dF, dC);
-    const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
-    Lanes C_dF = C.m[0] * dF.m[0];
-    PALPATE_UNROLL
-    for (int k = 1; k < 9; ++k) C_dF += C.m[k] * dF.m[k];
-    PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) dP.m[k] += m.volume_stiffness * (C_dF * C.m[k] + (J - 1.0) * dC.m[k]);
-  }
+  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
@@ -595,6 +598,60 @@ PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lan
   }
 }
 
+// v_i P_i of the neo-Hookean law (1.14), P = mu F + (lambda ln J - mu) cof F / J, on all four
+// lanes together (ln J one lane at a time); a lane with J <= 0 sends the block to the
+// per-lane formula and its continuation.
+template <bool volume_term>
+PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+  Mat3Lanes C;
+  cofactor_lanes(F, C);
+  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  Lanes log_J;
+  PALPATE_UNROLL
+  for (int l = 0; l < kLanes; ++l) {
+    if (!(J[l] > 0)) return weighted_stress_per_lane(m, F, v, vP);
+    log_J[l] = std::log(J[l]);
+  }
+  const Lanes v_mu = m.lame_mu * v, scale = v * (m.lame_lambda * log_J - m.lame_mu) / J;
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) vP.m[k] = v_mu * F.m[k] + scale * C.m[k];
+  if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
+}
+
+// v_i dP_i of the neo-Hookean law (1.15) at (F_i, G_i = F_i^-T) along dF_i, on all four lanes:
+// dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G (+ the volume term's).
+template <bool volume_term>
+PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& G,
+                                                      const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
+  Mat3Lanes C;
+  cofactor_lanes(F, C);
+  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  Lanes log_J;
+  PALPATE_UNROLL
+  for (int l = 0; l < kLanes; ++l) {
+    if (!(J[l] > 0)) return weighted_differential_per_lane(m, F, G, dF, v, vdP);
+    log_J[l] = std::log(J[l]);
+  }
+  Mat3Lanes T;  // dF^T G
+  PALPATE_UNROLL
+  for (int a = 0; a < 3; ++a)
+    PALPATE_UNROLL
+    for (int c = 0; c < 3; ++c) T(a, c) = dF(0, a) * G(0, c) + dF(1, a) * G(1, c) + dF(2, a) * G(2, c);
+  Lanes G_dF = G.m[0] * dF.m[0];
+  PALPATE_UNROLL
+  for (int k = 1; k < 9; ++k) G_dF += G.m[k] * dF.m[k];
+  const Lanes a = m.lame_mu - m.lame_lambda * log_J, b = m.lame_lambda * G_dF;
+  Mat3Lanes dP;
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r)
+    PALPATE_UNROLL
+    for (int c = 0; c < 3; ++c)
+      dP(r, c) = m.lame_mu * dF(r, c) + a * (G(r, 0) * T(0, c) + G(r, 1) * T(1, c) + G(r, 2) * T(2, c)) + b * G(r, c);
+  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
+}
+
 template <bool volume_term>
 void internal_forces_blocked(const Model& m, const double* __restrict x, double* __restrict f) {
   const int n = m.particle_count;
@@ -611,6 +668,8 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
     Mat3Lanes vP;
     if (m.law == MaterialLaw::corotational)
       weighted_corotational_stress<volume_term>(m, F, load(block.volume), vP);
+    else if (m.law == MaterialLaw::neo_hookean)
+      weighted_neo_hookean_stress<volume_term>(m, F, load(block.volume), vP);
     else if (m.law != MaterialLaw::stvk)
       weighted_stress_per_lane(m, F, load(block.volume), vP);
     else
@@ -634,7 +693,9 @@ void force_differential_blocked(const Model& m, const double* tangent_F, const d
     Mat3Lanes F, S, vdP;
     gather_matrices(tangent_F, i, F);
     gather_matrices(tangent_S_or_R, i, S);
-    if (m.law != MaterialLaw::stvk)  // S holds R (corotational) or F^-T (neo-Hookean)
+    if (m.law == MaterialLaw::neo_hookean)  // S holds F^-T
+      weighted_neo_hookean_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
+    else if (m.law != MaterialLaw::stvk)  // S holds R for the corotational law
       weighted_differential_per_lane(m, F, S, dF, load(block.volume), vdP);
     else
       weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
