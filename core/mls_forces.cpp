@@ -145,7 +145,7 @@ inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& 
 // flattened particle). There the returned stress is the finite extension
 // P = mu F + c cof F with the constant c = (lambda ln J_min - mu) / J_min of the law at
 // J_min = kNeoHookeanMinJ: no NaN, and a force that pushes the particle back towards positive
-// volume; the health check reports the inversion (inverted_particle) as for the other laws.
+// volume; the health checks treat the inversion (inverted_particle) as for the other laws.
 // inverse_transpose receives F^-T for the tangent (or cof F / J_min at J <= 0).
 constexpr double kNeoHookeanMinJ = 1e-2;
 inline double neo_hookean_stress(const Mat3& F, double lambda, double mu, Mat3& P, Mat3& inverse_transpose) {
