@@ -142,19 +142,17 @@ inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& 
 // Compressible neo-Hookean law (1.13): psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2,
 // I1 = tr(F^T F), J = det F; P = mu (F - F^-T) + lambda ln J F^-T (1.14). F^-T = cof F / J.
 // The energy grows without bound as J -> 0+, and is +infinity for J <= 0 (an inverted or
-// flattened particle). There the returned stress is the finite extension
-// P = mu F + c cof F with the constant c = (lambda ln J_min - mu) / J_min of the law at
-// J_min = kNeoHookeanMinJ: no NaN, and a force that pushes the particle back towards positive
-// volume; the health checks treat the inversion (inverted_particle) as for the other laws.
-// inverse_transpose receives F^-T for the tangent (or cof F / J_min at J <= 0).
-constexpr double kNeoHookeanMinJ = 1e-2;
+// flattened particle). No finite stress is right there; the law exerts none (P = 0, and a
+// zero tangent), so nothing is NaN and no energy is released that the health checks never
+// saw put in: they report the inversion (inverted_particle) as for the other laws, and the
+// volume term, when on, is what pushes the particle back.
+// inverse_transpose receives F^-T for the tangent (0 at J <= 0).
 inline double neo_hookean_stress(const Mat3& F, double lambda, double mu, Mat3& P, Mat3& inverse_transpose) {
   const Mat3 C = cofactor(F);
   const double J = F.col(0).dot(C.col(0));
   if (!(J > 0)) {
-    const double c = (lambda * std::log(kNeoHookeanMinJ) - mu) / kNeoHookeanMinJ;
-    inverse_transpose = C / kNeoHookeanMinJ;
-    P = mu * F + c * C;
+    inverse_transpose.setZero();
+    P.setZero();
     return HUGE_VAL;
   }
   const double log_J = std::log(J);
@@ -165,17 +163,10 @@ inline double neo_hookean_stress(const Mat3& F, double lambda, double mu, Mat3& 
 
 // Its differential along dF (1.15), with G = F^-T:
 // dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G  (G : dF = tr(F^-1 dF)).
-// At J <= 0, the differential of the finite extension: dP = mu dF + c d cof F.
+// At J <= 0 the law exerts no stress and has no tangent.
 inline Mat3 neo_hookean_differential(const Mat3& F, const Mat3& G, const Mat3& dF, double lambda, double mu) {
   const double J = F.determinant();
-  if (!(J > 0)) {
-    const double c = (lambda * std::log(kNeoHookeanMinJ) - mu) / kNeoHookeanMinJ;
-    Mat3 dC;
-    dC.col(0) = dF.col(1).cross(F.col(2)) + F.col(1).cross(dF.col(2));
-    dC.col(1) = dF.col(2).cross(F.col(0)) + F.col(2).cross(dF.col(0));
-    dC.col(2) = dF.col(0).cross(F.col(1)) + F.col(0).cross(dF.col(1));
-    return mu * dF + c * dC;
-  }
+  if (!(J > 0)) return Mat3::Zero();
   const double log_J = std::log(J);
   return mu * dF + (mu - lambda * log_J) * (G * dF.transpose() * G) + (lambda * (G.array() * dF.array()).sum()) * G;
 }

@@ -10,6 +10,8 @@
 
 #include "core/kernel.h"
 #include "core/mls_forces.h"
+#include "core/state.h"
+#include "core/step.h"
 #include "test_util.h"
 
 namespace palpate {
@@ -520,51 +522,70 @@ TEST(NeoHookean, ForceDifferentialMatchesFiniteDifferences) {
   EXPECT_LT((df - (fp - fm) / 2e-6).norm(), 1e-6 * df.norm());
 }
 
-// J -> 0+: the energy grows without bound (no finite-energy inversion); J <= 0: the energy
-// is +infinity, the stress is finite, pushes towards positive volume (P : cof F < 0, so
-// -P raises J), and an inverted cloud gives finite forces, which the health check's
-// inversion test then reports (tests/health_test.cpp covers that check).
+// J -> 0+: the energy and the compressive stress grow without bound (no finite-energy
+// inversion); J <= 0: the energy is +infinity and the law exerts nothing (P = 0, zero
+// tangent), so an inverted cloud gives finite forces and differentials, and with the
+// volume term on only the volume term's, which push towards positive volume.
 TEST(NeoHookean, CompressionToZeroVolumeCostsUnboundedEnergyAndInversionIsFinite) {
   const Model m = test::model_from_json(cloud_scene(kGrid, "", kNeoHookean));
-  double previous = 0;
+  double previous_psi = 0, previous_P = 0;
   for (double s : {0.5, 0.1, 1e-2, 1e-4, 1e-8}) {  // uniaxial F = diag(s, 1, 1)
     Mat3 F = Mat3::Identity(), P;
     F(0, 0) = s;
     const double psi = first_piola_stress(m, F, P);
-    EXPECT_GT(psi, previous) << "s = " << s;
-    EXPECT_LT(P(0, 0), 0.0) << "s = " << s;  // compressive, growing like ln s / s
-    previous = psi;
+    EXPECT_GT(psi, previous_psi) << "s = " << s;
+    EXPECT_LT(P(0, 0), previous_P) << "s = " << s;  // compressive, growing like ln s / s
+    previous_psi = psi;
+    previous_P = P(0, 0);
   }
-  EXPECT_GT(previous, 0.5 * m.lame_lambda * std::log(1e-8) * std::log(1e-8));
+  EXPECT_GT(previous_psi, 0.5 * m.lame_lambda * std::log(1e-8) * std::log(1e-8));
   for (const Mat3& F : {Mat3(Vec3(1, 1, -1).asDiagonal()), Mat3(Vec3(0, 1, 1).asDiagonal()),
                         Mat3(Vec3(-0.5, 0.8, 1.2).asDiagonal())}) {
     Mat3 P;
     EXPECT_EQ(first_piola_stress(m, F, P), HUGE_VAL);
-    EXPECT_TRUE(P.allFinite());
-    Mat3 C;  // cof F
-    C.col(0) = F.col(1).cross(F.col(2));
-    C.col(1) = F.col(2).cross(F.col(0));
-    C.col(2) = F.col(0).cross(F.col(1));
-    EXPECT_LT((P.array() * C.array()).sum(), 0.0);
+    EXPECT_EQ(P, Mat3::Zero());
   }
   // The body mirrored through z = 0: F = diag(1, 1, -1) at every particle.
   Points x = m.rest_position;
   x.row(2) *= -1.0;
   Points f(3, m.particle_count);
   mls_internal_forces(m, x, f);
-  EXPECT_TRUE(f.allFinite());
-  EXPECT_GT(f.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(f.cwiseAbs().maxCoeff(), 0.0);
   EXPECT_EQ(mls_strain_energy(m, x), HUGE_VAL);
   std::vector<double> tangent_F, tangent_G;
   mls_linearize(m, x, tangent_F, tangent_G);
-  // The differential there is that of the continuation P = mu F + c cof F, exactly.
-  const Points dx = random_displacement(m, 0.01, 3);
-  Points df(3, m.particle_count), fp(3, m.particle_count), fm(3, m.particle_count);
-  mls_force_differential(m, tangent_F, tangent_G, dx, df);
-  EXPECT_TRUE(df.allFinite());
-  mls_internal_forces(m, x + 1e-6 * dx, fp);
-  mls_internal_forces(m, x - 1e-6 * dx, fm);
-  EXPECT_LT((df - (fp - fm) / 2e-6).norm(), 1e-6 * df.norm());
+  Points df(3, m.particle_count);
+  mls_force_differential(m, tangent_F, tangent_G, random_displacement(m, 0.01, 3), df);
+  EXPECT_EQ(df.cwiseAbs().maxCoeff(), 0.0);
+  // With the volume term: its forces alone, finite, and they raise J (f . dJ/dx > 0).
+  const Model mv = test::model_from_json(cloud_scene(kGrid, "", kNeoHookean + R"(, "volume_stiffness": 700)"));
+  mls_internal_forces(mv, x, f);
+  EXPECT_TRUE(f.allFinite());
+  double dJ = 0;  // sum_i dJ_i along f, by central differences of the gradients
+  const double h = 1e-7;
+  for (int i = 0; i < mv.particle_count; ++i)
+    dJ += (deformation_gradient(mv, x + h * f, i).determinant() - deformation_gradient(mv, x - h * f, i).determinant()) /
+          (2 * h);
+  EXPECT_GT(dJ, 0.0);
+}
+
+// Stepping a body inverted through its bottom face (F = diag(1, 1, -1) everywhere, no
+// volume term): the forces stay finite, and the health checks stop the run with the
+// inversion fault, as for the other laws, rather than with a non-finite state.
+TEST(NeoHookean, SteppingAnInvertedBodyIsAnInversionFaultNotANonFiniteState) {
+  for (const std::string law : {"neo_hookean", "corotational"}) {
+    SCOPED_TRACE("law " + law);
+    const test::Setup setup = test::setup_from_json(
+        R"({"body": {"distribution": {"type": "grid", "per_edge": 6}},
+            "material": {"young_modulus": 1e4, "poisson_ratio": 0.3, "law": ")" + law + R"("},
+            "integrator": {"type": "symplectic_euler", "dt": 1e-4}})");
+    State state = make_state(setup.model, setup.opt);
+    for (int i = 0; i < setup.model.particle_count; ++i) state.position(2, i) = -2.0 - setup.model.rest_position(2, i);
+    StepStatus status = StepStatus::ok;
+    for (int k = 0; k <= setup.opt.health.inversion_sweep_ticks && status == StepStatus::ok; ++k)
+      status = step(setup.model, setup.opt, state);
+    EXPECT_EQ(status, StepStatus::inverted_particle);
+  }
 }
 
 // The vectorised loops over Model::blocks (four particles per block) against the
