@@ -165,7 +165,7 @@ inline double neo_hookean_stress(const Mat3& F, double lambda, double mu, Mat3& 
 // dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G  (G : dF = tr(F^-1 dF)).
 // At J <= 0 the law exerts no stress and has no tangent.
 inline Mat3 neo_hookean_differential(const Mat3& F, const Mat3& G, const Mat3& dF, double lambda, double mu) {
-  const double J = F.determinant();
+  const double J = F.col(0).dot(cofactor(F).col(0));  // as neo_hookean_stress computes it
   if (!(J > 0)) return Mat3::Zero();
   const double log_J = std::log(J);
   return mu * dF + (mu - lambda * log_J) * (G * dF.transpose() * G) + (lambda * (G.array() * dF.array()).sum()) * G;
@@ -591,7 +591,7 @@ PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lan
 
 // v_i P_i of the neo-Hookean law (1.14), P = mu F + (lambda ln J - mu) cof F / J, on all four
 // lanes together (ln J one lane at a time); a lane with J <= 0 sends the block to the
-// per-lane formula and its continuation.
+// per-lane formula (no stress from the law at J <= 0).
 template <bool volume_term>
 PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
   Mat3Lanes C;
