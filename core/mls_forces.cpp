@@ -139,6 +139,38 @@ inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& 
   return (2 * mu) * (dF - dR) + (lambda * A.trace()) * R + (lambda * (U.trace() - 3.0)) * dR;
 }
 
+// Compressible neo-Hookean law (1.13): psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2,
+// I1 = tr(F^T F), J = det F; P = mu (F - F^-T) + lambda ln J F^-T (1.14). F^-T = cof F / J.
+// The energy grows without bound as J -> 0+, and is +infinity for J <= 0 (an inverted or
+// flattened particle). No finite stress is right there; the law exerts none (P = 0, and a
+// zero tangent), so nothing is NaN and no energy is released that the health checks never
+// saw put in: they report the inversion (inverted_particle) as for the other laws, and the
+// volume term, when on, is what pushes the particle back.
+// inverse_transpose receives F^-T for the tangent (0 at J <= 0).
+inline double neo_hookean_stress(const Mat3& F, double lambda, double mu, Mat3& P, Mat3& inverse_transpose) {
+  const Mat3 C = cofactor(F);
+  const double J = F.col(0).dot(C.col(0));
+  if (!(J > 0)) {
+    inverse_transpose.setZero();
+    P.setZero();
+    return HUGE_VAL;
+  }
+  const double log_J = std::log(J);
+  inverse_transpose = C / J;
+  P = mu * F + (lambda * log_J - mu) * inverse_transpose;
+  return 0.5 * mu * (F.squaredNorm() - 3.0) - mu * log_J + 0.5 * lambda * log_J * log_J;
+}
+
+// Its differential along dF (1.15), with G = F^-T:
+// dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G  (G : dF = tr(F^-1 dF)).
+// At J <= 0 the law exerts no stress and has no tangent.
+inline Mat3 neo_hookean_differential(const Mat3& F, const Mat3& G, const Mat3& dF, double lambda, double mu) {
+  const double J = F.col(0).dot(cofactor(F).col(0));  // as neo_hookean_stress computes it
+  if (!(J > 0)) return Mat3::Zero();
+  const double log_J = std::log(J);
+  return mu * dF + (mu - lambda * log_J) * (G * dF.transpose() * G) + (lambda * (G.array() * dF.array()).sum()) * G;
+}
+
 // Differential of the volume term's stress k_v (J - 1) cof F along dF:
 // k_v [(cof F : dF) cof F + (J - 1) d cof F], d cof F from the columns crossed pairwise.
 inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volume_stiffness) {
@@ -152,8 +184,8 @@ inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volum
 }
 
 // First Piola stress P of particle i (elastic + volume term) and its energy density.
-// S_out receives what the tangent needs: S (St Venant-Kirchhoff) or R (corotational);
-// the linear law needs nothing (I).
+// S_out receives what the tangent needs: S (St Venant-Kirchhoff), R (corotational) or
+// F^-T (neo-Hookean); the linear law needs nothing (I).
 inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out = nullptr) {
   Mat3 S = Mat3::Identity();
   double psi = 0;
@@ -163,6 +195,9 @@ inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out =
       break;
     case MaterialLaw::linear:
       psi = linear_stress(F, m.lame_lambda, m.lame_mu, P);
+      break;
+    case MaterialLaw::neo_hookean:
+      psi = neo_hookean_stress(F, m.lame_lambda, m.lame_mu, P, S);
       break;
     case MaterialLaw::stvk:
       psi = stvk_stress(F, m.lame_lambda, m.lame_mu, S);
@@ -185,6 +220,9 @@ inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, con
   switch (m.law) {
     case MaterialLaw::corotational:  // S holds R
       dP = corotational_differential(F, S, dF, m.lame_lambda, m.lame_mu);
+      break;
+    case MaterialLaw::neo_hookean:  // S holds F^-T
+      dP = neo_hookean_differential(F, S, dF, m.lame_lambda, m.lame_mu);
       break;
     case MaterialLaw::linear:  // dP = 2 mu sym(dF) + lambda tr(dF) I
       dP = m.lame_mu * (dF + dF.transpose());
@@ -420,6 +458,20 @@ PALPATE_INLINE void weighted_piola_stress(const Model& m, const Mat3Lanes& F, co
   if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
 }
 
+// dP += the volume term's differential k_v [(cof F : dF) cof F + (J - 1) d cof F].
+PALPATE_INLINE void add_volume_term_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& dF, Mat3Lanes& dP) {
+  Mat3Lanes C, dC = {};  // cof F and its differential
+  cofactor_lanes(F, C);
+  add_crossed_columns(dF, F, dC);
+  add_crossed_columns(F, dF, dC);
+  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  Lanes C_dF = C.m[0] * dF.m[0];
+  PALPATE_UNROLL
+  for (int k = 1; k < 9; ++k) C_dF += C.m[k] * dF.m[k];
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) dP.m[k] += m.volume_stiffness * (C_dF * C.m[k] + (J - 1.0) * dC.m[k]);
+}
+
 // v_i dP_i, the differential of weighted_piola_stress at (F_i, S_i) along dF_i:
 // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS, and for the
 // volume term k_v [(cof F : dF) cof F + (J - 1) d cof F].
@@ -446,18 +498,7 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
     for (int c = 0; c < 3; ++c)
       dP(r, c) = dF(r, 0) * S(0, c) + dF(r, 1) * S(1, c) + dF(r, 2) * S(2, c) + F(r, 0) * dS(0, c) +
                  F(r, 1) * dS(1, c) + F(r, 2) * dS(2, c);
-  if constexpr (volume_term) {
-    Mat3Lanes C, dC = {};  // cof F and its differential
-    cofactor_lanes(F, C);
-    add_crossed_columns(dF, F, dC);
-    add_crossed_columns(F, dF, dC);
-    const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
-    Lanes C_dF = C.m[0] * dF.m[0];
-    PALPATE_UNROLL
-    for (int k = 1; k < 9; ++k) C_dF += C.m[k] * dF.m[k];
-    PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) dP.m[k] += m.volume_stiffness * (C_dF * C.m[k] + (J - 1.0) * dC.m[k]);
-  }
+  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
@@ -548,6 +589,60 @@ PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lan
   }
 }
 
+// v_i P_i of the neo-Hookean law (1.14), P = mu F + (lambda ln J - mu) cof F / J, on all four
+// lanes together (ln J one lane at a time); a lane with J <= 0 sends the block to the
+// per-lane formula (no stress from the law at J <= 0).
+template <bool volume_term>
+PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+  Mat3Lanes C;
+  cofactor_lanes(F, C);
+  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  Lanes log_J;
+  PALPATE_UNROLL
+  for (int l = 0; l < kLanes; ++l) {
+    if (!(J[l] > 0)) return weighted_stress_per_lane(m, F, v, vP);
+    log_J[l] = std::log(J[l]);
+  }
+  const Lanes v_mu = m.lame_mu * v, scale = v * (m.lame_lambda * log_J - m.lame_mu) / J;
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) vP.m[k] = v_mu * F.m[k] + scale * C.m[k];
+  if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
+}
+
+// v_i dP_i of the neo-Hookean law (1.15) at (F_i, G_i = F_i^-T) along dF_i, on all four lanes:
+// dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G (+ the volume term's).
+template <bool volume_term>
+PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& G,
+                                                      const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
+  Mat3Lanes C;
+  cofactor_lanes(F, C);
+  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  Lanes log_J;
+  PALPATE_UNROLL
+  for (int l = 0; l < kLanes; ++l) {
+    if (!(J[l] > 0)) return weighted_differential_per_lane(m, F, G, dF, v, vdP);
+    log_J[l] = std::log(J[l]);
+  }
+  Mat3Lanes T;  // dF^T G
+  PALPATE_UNROLL
+  for (int a = 0; a < 3; ++a)
+    PALPATE_UNROLL
+    for (int c = 0; c < 3; ++c) T(a, c) = dF(0, a) * G(0, c) + dF(1, a) * G(1, c) + dF(2, a) * G(2, c);
+  Lanes G_dF = G.m[0] * dF.m[0];
+  PALPATE_UNROLL
+  for (int k = 1; k < 9; ++k) G_dF += G.m[k] * dF.m[k];
+  const Lanes a = m.lame_mu - m.lame_lambda * log_J, b = m.lame_lambda * G_dF;
+  Mat3Lanes dP;
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r)
+    PALPATE_UNROLL
+    for (int c = 0; c < 3; ++c)
+      dP(r, c) = m.lame_mu * dF(r, c) + a * (G(r, 0) * T(0, c) + G(r, 1) * T(1, c) + G(r, 2) * T(2, c)) + b * G(r, c);
+  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
+}
+
 template <bool volume_term>
 void internal_forces_blocked(const Model& m, const double* __restrict x, double* __restrict f) {
   const int n = m.particle_count;
@@ -564,6 +659,8 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
     Mat3Lanes vP;
     if (m.law == MaterialLaw::corotational)
       weighted_corotational_stress<volume_term>(m, F, load(block.volume), vP);
+    else if (m.law == MaterialLaw::neo_hookean)
+      weighted_neo_hookean_stress<volume_term>(m, F, load(block.volume), vP);
     else if (m.law != MaterialLaw::stvk)
       weighted_stress_per_lane(m, F, load(block.volume), vP);
     else
@@ -587,7 +684,9 @@ void force_differential_blocked(const Model& m, const double* tangent_F, const d
     Mat3Lanes F, S, vdP;
     gather_matrices(tangent_F, i, F);
     gather_matrices(tangent_S_or_R, i, S);
-    if (m.law != MaterialLaw::stvk)  // S holds R for the corotational law
+    if (m.law == MaterialLaw::neo_hookean)  // S holds F^-T
+      weighted_neo_hookean_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
+    else if (m.law != MaterialLaw::stvk)  // S holds R for the corotational law
       weighted_differential_per_lane(m, F, S, dF, load(block.volume), vdP);
     else
       weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
@@ -645,7 +744,7 @@ void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
     Mat3 P, S;
-    piola_stress(m, F, P, &S);  // S, or R for the corotational law
+    piola_stress(m, F, P, &S);  // S, or R (corotational), or F^-T (neo-Hookean)
     Eigen::Map<Mat3> F_out(&tangent_F[9 * static_cast<size_t>(i)]), S_out(&tangent_S_or_R[9 * static_cast<size_t>(i)]);
     F_out = F;
     S_out = S;

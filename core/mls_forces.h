@@ -22,12 +22,13 @@ double mls_strain_energy(const Model& model, const Points& x);
 // Deformation gradient of particle i: F_i = sum_j (x_j - x_i) d_j^T + C_i.
 Mat3 deformation_gradient(const Model& model, const Points& x, int i);
 
-// Material law of one particle: first Piola stress P = F S (+ k_v (J - 1) cof F)
-// for deformation gradient F; returns the energy density psi, J/m^3.
+// Material law of one particle: first Piola stress P (St Venant-Kirchhoff F S, corotational,
+// linear or neo-Hookean, + k_v (J - 1) cof F) for deformation gradient F; returns the energy
+// density psi, J/m^3 (+infinity for the neo-Hookean law at det F <= 0, where P is finite).
 double first_piola_stress(const Model& model, const Mat3& F, Mat3& P);
 
 // Tangent stiffness, matrix-free. mls_linearize caches F_i and S_i (9 x n
-// each) at x; mls_force_differential then gives df = (df/dx) dx = -K dx.
+// each; R_i for the corotational law, F_i^-T for the neo-Hookean) at x; mls_force_differential then gives df = (df/dx) dx = -K dx.
 void mls_linearize(const Model& model, const Points& x, std::vector<double>& tangent_F,
                       std::vector<double>& tangent_S_or_R);
 void mls_force_differential(const Model& model, const std::vector<double>& tangent_F,

@@ -69,7 +69,8 @@ constexpr Named<IntegrationRule> kIntegrationRules[] = {
 };
 
 constexpr Named<MaterialLaw> kMaterialLaws[] = {
-    {"stvk", MaterialLaw::stvk}, {"corotational", MaterialLaw::corotational}, {"linear", MaterialLaw::linear}};
+    {"stvk", MaterialLaw::stvk}, {"corotational", MaterialLaw::corotational}, {"linear", MaterialLaw::linear},
+    {"neo_hookean", MaterialLaw::neo_hookean}};
 constexpr Named<DistributionType> kDistributions[] = {
     {"grid", DistributionType::grid},
     {"jittered_grid", DistributionType::jittered_grid},

@@ -44,8 +44,9 @@ enum class IntegratorType { rk4, symplectic_euler, implicit_euler };
 enum class ToolGuide { vertical, free };
 // The MLS solid's material law: St Venant-Kirchhoff (A-4, A-5, the paper's), or the
 // corotational linear law psi = mu |F - R|^2 + lambda/2 (tr(R^T F) - 3)^2 (F = R U), or the
-// small-strain linear law (a verification law: the continuum of the linear hex FEM).
-enum class MaterialLaw { stvk, corotational, linear };
+// small-strain linear law (a verification law: the continuum of the linear hex FEM), or the
+// compressible neo-Hookean law psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2 (MLS only).
+enum class MaterialLaw { stvk, corotational, linear, neo_hookean };
 
 // Faces of the body's box, as bits of Scene::fixed_faces.
 enum Face : uint32_t {

@@ -128,6 +128,7 @@ enum MaterialLaw {
   stvk @0;                       # St Venant-Kirchhoff (the paper's)
   corotational @1;               # linear law of the Biot strain, rotated
   linear @2;                     # small strain (verification against the linear hex FEM)
+  neoHookean @3 $Json.name("neo_hookean");  # compressible neo-Hookean
 }
 struct Indenter {
   radius @0 :Float64 = 0.5;        # m, (0, 1000]

@@ -10,6 +10,8 @@
 
 #include "core/kernel.h"
 #include "core/mls_forces.h"
+#include "core/state.h"
+#include "core/step.h"
 #include "test_util.h"
 
 namespace palpate {
@@ -366,6 +368,226 @@ TEST(LinearLaw, ForcesAreTheEnergyGradientAndTheTangentIsExact) {
   EXPECT_LT(f.rowwise().sum().norm(), 1e-11 * f.cwiseAbs().maxCoeff() * m.particle_count);
 }
 
+// The compressible neo-Hookean law (material.law "neo_hookean", (1.13)-(1.15)). Independent
+// truths: the closed-form stress of homogeneous deformations (uniaxial stretch and
+// compression, simple shear, hydrostatic) written out entry by entry, and the nodal forces
+// of such a deformation imposed on a cloud from that stress; agreement with the small-strain
+// law to first order; frame indifference; forces the negative energy gradient; the tangent
+// by finite differences; and the behaviour at and beyond J = 0.
+const std::string kNeoHookean = R"(, "law": "neo_hookean")";
+
+// Nodal forces of a homogeneous deformation with stress P at every particle (A-10, A-11):
+// f_j -= v_i P d_ij over i's neighbours, f_i += v_i P sum_j d_ij.
+Points forces_of_uniform_stress(const Model& m, const Mat3& P) {
+  Points f = Points::Zero(3, m.particle_count);
+  for (int i = 0; i < m.particle_count; ++i)
+    for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+      const Vec3 g = m.volume[i] * P * m.gradient_weight.col(a);
+      f.col(m.neighbor_index[a]) -= g;
+      f.col(i) += g;
+    }
+  return f;
+}
+
+TEST(NeoHookean, HomogeneousDeformationsGiveTheClosedFormStressAndNodalForces) {
+  const Model m = test::model_from_json(cloud_scene(kJittered, "", kNeoHookean));
+  ASSERT_TRUE(detail::uses_blocked_loops(m));
+  const double lambda = m.lame_lambda, mu = m.lame_mu;
+  struct Case {
+    const char* name;
+    Mat3 F;
+    Mat3 P;  // the closed form
+    double psi;
+  };
+  std::vector<Case> cases;
+  for (double s : {0.6, 0.95, 1.05, 1.4}) {  // uniaxial: F = diag(s, 1, 1), J = s, F^-T = diag(1/s, 1, 1)
+    Mat3 F = Mat3::Identity(), P = Mat3::Zero();
+    F(0, 0) = s;
+    P(0, 0) = mu * (s - 1 / s) + lambda * std::log(s) / s;
+    P(1, 1) = P(2, 2) = lambda * std::log(s);
+    cases.push_back({"uniaxial", F, P,
+                     0.5 * mu * (s * s - 1) - mu * std::log(s) + 0.5 * lambda * std::log(s) * std::log(s)});
+  }
+  for (double gamma : {0.05, 0.5}) {  // simple shear: F = I + gamma e1 e2^T, J = 1: P = mu (F - F^-T)
+    Mat3 F = Mat3::Identity(), P = Mat3::Zero();
+    F(0, 1) = gamma;
+    P(0, 1) = mu * gamma;
+    P(1, 0) = mu * gamma;
+    cases.push_back({"simple shear", F, P, 0.5 * mu * gamma * gamma});
+  }
+  for (double s : {0.8, 1.2}) {  // hydrostatic: F = s I, J = s^3
+    const double l = 3 * std::log(s);
+    cases.push_back({"hydrostatic", s * Mat3::Identity(), (mu * (s - 1 / s) + lambda * l / s) * Mat3::Identity(),
+                     1.5 * mu * (s * s - 1) - mu * l + 0.5 * lambda * l * l});
+  }
+  for (const Case& c : cases) {
+    SCOPED_TRACE(std::string(c.name) + ", F = " + std::to_string(c.F(0, 0)) + ", " + std::to_string(c.F(0, 1)));
+    Mat3 P;
+    const double psi = first_piola_stress(m, c.F, P);
+    EXPECT_LT((P - c.P).cwiseAbs().maxCoeff(), 1e-12 * (lambda + mu));
+    EXPECT_NEAR(psi, c.psi, 1e-12 * (lambda + mu));
+    // Imposed on the cloud, x = F X, the MLS gradient is F at every particle and the
+    // nodal forces are those of the closed-form stress (the vectorised loop runs).
+    Points x(3, m.particle_count);
+    for (int i = 0; i < m.particle_count; ++i) x.col(i) = c.F * m.rest_position.col(i);
+    Points f(3, m.particle_count);
+    mls_internal_forces(m, x, f);
+    const Points expected = forces_of_uniform_stress(m, c.P);
+    EXPECT_LT((f - expected).cwiseAbs().maxCoeff(), 1e-11 * expected.cwiseAbs().maxCoeff());
+    EXPECT_NEAR(mls_strain_energy(m, x), c.psi * m.total_volume, 1e-11 * std::abs(c.psi) * m.total_volume);
+  }
+}
+
+TEST(NeoHookean, SmallStrainIsTheLinearLawToFirstOrder) {
+  const Model neo = test::model_from_json(cloud_scene(kGrid, "", kNeoHookean));
+  const Model lin = test::model_from_json(cloud_scene(kGrid, "", kLinear));
+  Mat3 G;
+  G << 0.3, -0.2, 0.5, 0.1, 0.4, -0.3, 0.2, 0.6, -0.1;
+  double previous = 0;
+  for (double scale : {1e-2, 1e-3, 1e-4}) {  // |P_neo - P_lin| / |P_lin| = O(scale)
+    Mat3 P_neo, P_lin;
+    first_piola_stress(neo, Mat3::Identity() + scale * G, P_neo);
+    first_piola_stress(lin, Mat3::Identity() + scale * G, P_lin);
+    const double relative = (P_neo - P_lin).norm() / P_lin.norm();
+    EXPECT_LT(relative, 3.0 * scale) << "scale " << scale;
+    if (previous > 0) {
+      EXPECT_NEAR(relative / previous, 0.1, 0.02) << "scale " << scale;  // first order, not better
+    }
+    previous = relative;
+  }
+}
+
+TEST(NeoHookean, EnergyAndStressAreFrameIndifferent) {
+  const Model m = test::model_from_json(cloud_scene(kJittered, "", kNeoHookean));
+  const Mat3 Q = Eigen::AngleAxisd(2.3, Vec3(0.3, -1, 0.5).normalized()).toRotationMatrix();
+  Mat3 F;
+  F << 1.2, 0.3, -0.1, 0.05, 0.8, 0.2, -0.15, 0.1, 1.1;
+  Mat3 P, P_rot;
+  const double psi = first_piola_stress(m, F, P);
+  EXPECT_NEAR(first_piola_stress(m, Q * F, P_rot), psi, 1e-12 * std::abs(psi));  // psi(QF) = psi(F)
+  EXPECT_LT((P_rot - Q * P).norm(), 1e-12 * P.norm());                           // P(QF) = Q P(F)
+  // On the cloud: a rigid rotation of a deformed body keeps its energy and rotates its forces;
+  // a rigid motion of the rest state is force and energy free.
+  const Points x = m.rest_position + random_displacement(m, 0.05, 17);
+  Points x_rot(3, m.particle_count), x_rigid(3, m.particle_count);
+  for (int i = 0; i < m.particle_count; ++i) {
+    x_rot.col(i) = Q * x.col(i) + Vec3(0.3, -1, 2);
+    x_rigid.col(i) = Q * m.rest_position.col(i) + Vec3(0.3, -1, 2);
+  }
+  Points f(3, m.particle_count), f_rot(3, m.particle_count), f_rigid(3, m.particle_count);
+  mls_internal_forces(m, x, f);
+  mls_internal_forces(m, x_rot, f_rot);
+  mls_internal_forces(m, x_rigid, f_rigid);
+  EXPECT_NEAR(mls_strain_energy(m, x_rot), mls_strain_energy(m, x), 1e-12 * mls_strain_energy(m, x));
+  EXPECT_LT((f_rot - Q * f).cwiseAbs().maxCoeff(), 1e-11 * f.cwiseAbs().maxCoeff());
+  EXPECT_LT(f_rigid.cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_NEAR(mls_strain_energy(m, x_rigid), 0.0, 1e-13);
+}
+
+TEST(NeoHookean, ForcesAreNegativeEnergyGradient) {
+  expect_forces_are_energy_gradient(test::model_from_json(cloud_scene(kJittered, "", kNeoHookean)), 0.05);
+  expect_forces_are_energy_gradient(
+      test::model_from_json(cloud_scene(kJittered, "", kNeoHookean + R"(, "volume_stiffness": 700)")), 0.05);
+  expect_forces_are_energy_gradient(test::model_from_json(cloud_scene(kJittered, R"(, "hourglass": 0.3)", kNeoHookean)),
+                                    0.05);  // the per-particle loop
+  const Model m = test::model_from_json(cloud_scene(kJittered, "", kNeoHookean));
+  expect_no_net_force_or_torque(m, m.rest_position + random_displacement(m, 0.05, 11));
+}
+
+TEST(NeoHookean, ForceDifferentialMatchesFiniteDifferences) {
+  // At strains of 8 % of the spacing per component (ln J far from 0) on the blocked loop,
+  // with the volume term, and on the per-particle loop (hourglass control on).
+  expect_tangent_matches_finite_differences(test::model_from_json(cloud_scene(kJittered, "", kNeoHookean)), 0.08);
+  expect_tangent_matches_finite_differences(
+      test::model_from_json(cloud_scene(kJittered, "", kNeoHookean + R"(, "volume_stiffness": 700)")), 0.08);
+  expect_tangent_matches_finite_differences(
+      test::model_from_json(cloud_scene(kJittered, R"(, "hourglass": 0.2)", kNeoHookean)), 0.08);
+  // At a strong compression of one particle's F (J = 0.3): (1.15) against differences of (1.14).
+  const Model m = test::model_from_json(cloud_scene(kGrid, "", kNeoHookean));
+  Mat3 F;
+  F << 0.5, 0.2, -0.1, 0.1, 0.7, 0.15, -0.05, 0.1, 0.9;
+  ASSERT_GT(F.determinant(), 0.2);
+  std::vector<double> tangent_F, tangent_G;
+  Points x(3, m.particle_count);
+  for (int i = 0; i < m.particle_count; ++i) x.col(i) = F * m.rest_position.col(i);
+  mls_linearize(m, x, tangent_F, tangent_G);
+  for (int i = 0; i < m.particle_count; ++i)  // what the differential needs: F and F^-T
+    ASSERT_LT((Eigen::Map<const Mat3>(&tangent_G[9 * static_cast<size_t>(i)]) - F.inverse().transpose()).norm(),
+              1e-11 * F.inverse().norm());
+  const Points dx = random_displacement(m, 0.01, 4);
+  Points df(3, m.particle_count), fp(3, m.particle_count), fm(3, m.particle_count);
+  mls_force_differential(m, tangent_F, tangent_G, dx, df);
+  mls_internal_forces(m, x + 1e-6 * dx, fp);
+  mls_internal_forces(m, x - 1e-6 * dx, fm);
+  EXPECT_LT((df - (fp - fm) / 2e-6).norm(), 1e-6 * df.norm());
+}
+
+// J -> 0+: the energy and the compressive stress grow without bound (no finite-energy
+// inversion); J <= 0: the energy is +infinity and the law exerts nothing (P = 0, zero
+// tangent), so an inverted cloud gives finite forces and differentials, and with the
+// volume term on only the volume term's, which push towards positive volume.
+TEST(NeoHookean, CompressionToZeroVolumeCostsUnboundedEnergyAndInversionIsFinite) {
+  const Model m = test::model_from_json(cloud_scene(kGrid, "", kNeoHookean));
+  double previous_psi = 0, previous_P = 0;
+  for (double s : {0.5, 0.1, 1e-2, 1e-4, 1e-8}) {  // uniaxial F = diag(s, 1, 1)
+    Mat3 F = Mat3::Identity(), P;
+    F(0, 0) = s;
+    const double psi = first_piola_stress(m, F, P);
+    EXPECT_GT(psi, previous_psi) << "s = " << s;
+    EXPECT_LT(P(0, 0), previous_P) << "s = " << s;  // compressive, growing like ln s / s
+    previous_psi = psi;
+    previous_P = P(0, 0);
+  }
+  EXPECT_GT(previous_psi, 0.5 * m.lame_lambda * std::log(1e-8) * std::log(1e-8));
+  for (const Mat3& F : {Mat3(Vec3(1, 1, -1).asDiagonal()), Mat3(Vec3(0, 1, 1).asDiagonal()),
+                        Mat3(Vec3(-0.5, 0.8, 1.2).asDiagonal())}) {
+    Mat3 P;
+    EXPECT_EQ(first_piola_stress(m, F, P), HUGE_VAL);
+    EXPECT_EQ(P, Mat3::Zero());
+  }
+  // The body mirrored through z = 0: F = diag(1, 1, -1) at every particle.
+  Points x = m.rest_position;
+  x.row(2) *= -1.0;
+  Points f(3, m.particle_count);
+  mls_internal_forces(m, x, f);
+  EXPECT_EQ(f.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(mls_strain_energy(m, x), HUGE_VAL);
+  std::vector<double> tangent_F, tangent_G;
+  mls_linearize(m, x, tangent_F, tangent_G);
+  Points df(3, m.particle_count);
+  mls_force_differential(m, tangent_F, tangent_G, random_displacement(m, 0.01, 3), df);
+  EXPECT_EQ(df.cwiseAbs().maxCoeff(), 0.0);
+  // With the volume term: its forces alone, finite, and they raise J (f . dJ/dx > 0).
+  const Model mv = test::model_from_json(cloud_scene(kGrid, "", kNeoHookean + R"(, "volume_stiffness": 700)"));
+  mls_internal_forces(mv, x, f);
+  EXPECT_TRUE(f.allFinite());
+  double dJ = 0;  // sum_i dJ_i along f, by central differences of the gradients
+  const double h = 1e-7;
+  for (int i = 0; i < mv.particle_count; ++i)
+    dJ += (deformation_gradient(mv, x + h * f, i).determinant() - deformation_gradient(mv, x - h * f, i).determinant()) /
+          (2 * h);
+  EXPECT_GT(dJ, 0.0);
+}
+
+// Stepping a body inverted through its bottom face (F = diag(1, 1, -1) everywhere, no
+// volume term): the forces stay finite, and the health checks stop the run with the
+// inversion fault, as for the other laws, rather than with a non-finite state.
+TEST(NeoHookean, SteppingAnInvertedBodyIsAnInversionFaultNotANonFiniteState) {
+  for (const std::string law : {"neo_hookean", "corotational"}) {
+    SCOPED_TRACE("law " + law);
+    const test::Setup setup = test::setup_from_json(
+        R"({"body": {"distribution": {"type": "grid", "per_edge": 6}},
+            "material": {"young_modulus": 1e4, "poisson_ratio": 0.3, "law": ")" + law + R"("},
+            "integrator": {"type": "symplectic_euler", "dt": 1e-4}})");
+    State state = make_state(setup.model, setup.opt);
+    for (int i = 0; i < setup.model.particle_count; ++i) state.position(2, i) = -2.0 - setup.model.rest_position(2, i);
+    StepStatus status = StepStatus::ok;
+    for (int k = 0; k <= setup.opt.health.inversion_sweep_ticks && status == StepStatus::ok; ++k)
+      status = step(setup.model, setup.opt, state);
+    EXPECT_EQ(status, StepStatus::inverted_particle);
+  }
+}
+
 // The vectorised loops over Model::blocks (four particles per block) against the
 // per-particle loops, for every law with and without the volume term (A-12), on clouds
 // whose particle count is not a multiple of four: the last block then has padding lanes
@@ -386,7 +608,7 @@ TEST(MlsSolid, BlockedLoopsMatchThePerParticleLoopsWithPaddingLanes) {
   const Mat3 Q = Eigen::AngleAxisd(2.0, Vec3(1, 2, -1).normalized()).toRotationMatrix();
   const Mat3 stretch = Vec3(1.35, 0.7, 1.1).asDiagonal();
   for (const Cloud& cloud : clouds)
-    for (const std::string law : {"stvk", "corotational", "linear"})
+    for (const std::string law : {"stvk", "corotational", "linear", "neo_hookean"})
       for (const std::string k_v : {"0", "700"}) {
         SCOPED_TRACE(cloud.distribution + ", law " + law + ", k_v " + k_v);
         const std::string material = R"(, "law": ")" + law + R"(", "volume_stiffness": )" + k_v;
@@ -428,7 +650,7 @@ TEST(MlsSolid, BlockedLoopsMatchThePerParticleLoopsWithPaddingLanes) {
 // particles); the tests above check them law by law on 6^3 = 4 * 54 clouds, not every law
 // with the volume term.
 TEST(MlsSolid, EveryLawWithTheVolumeTermIsEnergyConsistentAndMomentumConservingWithPaddingLanes) {
-  for (const std::string law : {"stvk", "corotational", "linear"}) {
+  for (const std::string law : {"stvk", "corotational", "linear", "neo_hookean"}) {
     SCOPED_TRACE("law " + law);
     const Model m = test::model_from_json(
         cloud_scene(R"({"type": "grid", "per_edge": 5})", "", R"(, "law": ")" + law + R"(", "volume_stiffness": 700)"));

@@ -726,12 +726,20 @@ TEST(SceneMaterialLaw, CorotationalIsAnMlsLawAndUnknownLawsAreNamed) {
   EXPECT_EQ(s.material.law, MaterialLaw::corotational);
   EXPECT_EQ(test::scene_from_json("{}").material.law, MaterialLaw::stvk);
   EXPECT_EQ(test::scene_from_json(R"({"material": {"law": "linear"}})").material.law, MaterialLaw::linear);
+  EXPECT_EQ(test::scene_from_json(R"({"material": {"law": "neo_hookean"}})").material.law, MaterialLaw::neo_hookean);
+  EXPECT_STREQ(to_string(MaterialLaw::neo_hookean), "neo_hookean");
   try {
-    test::scene_from_json(R"({"material": {"law": "neo_hookean"}})");
+    test::scene_from_json(R"({"material": {"law": "mooney_rivlin"}})");
     FAIL() << "an unknown law was accepted";
   } catch (const SceneError& e) {
     EXPECT_EQ(e.field(), "/material/law");
-    EXPECT_EQ(e.reason(), "unknown material law 'neo_hookean' (known: stvk, corotational, linear)");
+    EXPECT_EQ(e.reason(), "unknown material law 'mooney_rivlin' (known: stvk, corotational, linear, neo_hookean)");
+  }
+  try {
+    test::scene_from_json(R"({"model": "hex_fem", "material": {"law": "neo_hookean"}})");
+    FAIL() << "the hex FEM took the MLS neo-Hookean law";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/material/law");
   }
   try {
     test::scene_from_json(R"({"model": "hex_fem", "material": {"law": "corotational"}})");

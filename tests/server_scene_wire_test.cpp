@@ -79,6 +79,11 @@ TEST(SceneWire, MaterialLawAndVolumetricIntegrationRoundTrip) {
   const Scene s = scene_from_wire(scene, "<rpc scene>", ".");
   EXPECT_EQ(s.material.law, MaterialLaw::corotational);
   EXPECT_EQ(s.hex_fem.volumetric_integration, HexVolumetricIntegration::reduced);
+  capnp::MallocMessageBuilder mb_neo;
+  auto neo = mb_neo.initRoot<wire::Scene>();
+  scene_json_to_wire(R"({"material": {"law": "neo_hookean"}})", "t.json", neo);
+  EXPECT_EQ(neo.getMaterial().getLaw(), wire::MaterialLaw::NEO_HOOKEAN);
+  EXPECT_EQ(scene_from_wire(neo, "<rpc scene>", ".").material.law, MaterialLaw::neo_hookean);
 }
 
 // The health checks and the envelope override cross the wire too, with the file's validation.
