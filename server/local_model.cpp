@@ -18,6 +18,7 @@ StiffnessSource::StiffnessSource(const Model& model, bool worker_thread)
   newest_.tick = -1;
   if (threaded_) {
     input_ = make_state(model, Options{});  // sized once: later copies reuse the storage
+    work_ = input_;                          // the worker's own copy, made before it starts
     thread_ = std::thread([this] { run(); });
   }
 }
@@ -66,7 +67,7 @@ void StiffnessSource::run() {
   sched_param normal{};
   pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
   setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
-  CarriedState work = input_;
+  CarriedState& work = work_;
   uint64_t warm_generation = 0;
   for (;;) {
     uint64_t generation = 0;

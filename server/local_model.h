@@ -48,6 +48,8 @@ class StiffnessSource {
   LocalContactModel newest_;    // session thread
   uint64_t generation_ = 0;     // session thread: bumped by invalidate()
 
+  CarriedState work_;  // the worker's state (swapped with input_ under mutex_)
+
   std::mutex mutex_;  // guards the members below
   std::condition_variable wake_;
   CarriedState input_;
