@@ -589,20 +589,28 @@ PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lan
   }
 }
 
+// J = det F (through its cofactor C, written) and ln J on the four lanes; false when a
+// lane has J <= 0, where the neo-Hookean law exerts nothing (the per-lane formula handles
+// the block).
+PALPATE_INLINE bool log_det_lanes(const Mat3Lanes& F, Mat3Lanes& C, Lanes& J, Lanes& log_J) {
+  cofactor_lanes(F, C);
+  J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  PALPATE_UNROLL
+  for (int l = 0; l < kLanes; ++l) {
+    if (!(J[l] > 0)) return false;
+    log_J[l] = std::log(J[l]);
+  }
+  return true;
+}
+
 // v_i P_i of the neo-Hookean law (1.14), P = mu F + (lambda ln J - mu) cof F / J, on all four
 // lanes together (ln J one lane at a time); a lane with J <= 0 sends the block to the
 // per-lane formula (no stress from the law at J <= 0).
 template <bool volume_term>
 PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
   Mat3Lanes C;
-  cofactor_lanes(F, C);
-  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
-  Lanes log_J;
-  PALPATE_UNROLL
-  for (int l = 0; l < kLanes; ++l) {
-    if (!(J[l] > 0)) return weighted_stress_per_lane(m, F, v, vP);
-    log_J[l] = std::log(J[l]);
-  }
+  Lanes J, log_J;
+  if (!log_det_lanes(F, C, J, log_J)) return weighted_stress_per_lane(m, F, v, vP);
   const Lanes v_mu = m.lame_mu * v, scale = v * (m.lame_lambda * log_J - m.lame_mu) / J;
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vP.m[k] = v_mu * F.m[k] + scale * C.m[k];
@@ -615,14 +623,8 @@ template <bool volume_term>
 PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& G,
                                                       const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
   Mat3Lanes C;
-  cofactor_lanes(F, C);
-  const Lanes J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
-  Lanes log_J;
-  PALPATE_UNROLL
-  for (int l = 0; l < kLanes; ++l) {
-    if (!(J[l] > 0)) return weighted_differential_per_lane(m, F, G, dF, v, vdP);
-    log_J[l] = std::log(J[l]);
-  }
+  Lanes J, log_J;
+  if (!log_det_lanes(F, C, J, log_J)) return weighted_differential_per_lane(m, F, G, dF, v, vdP);
   Mat3Lanes T;  // dF^T G
   PALPATE_UNROLL
   for (int a = 0; a < 3; ++a)

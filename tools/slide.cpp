@@ -51,36 +51,29 @@ int main(int argc, char** argv) {
   SlideSpec spec;
   std::vector<double> speeds{1.0, 0.1, 0.01, 0.001};
   bool json = false, quiet = false;
-  try {
-    for (cli::Arguments args(argc, argv); args.next();) {
-      const std::string& arg = args.flag();
-      auto value = [&] { return args.value(); };
-      if (arg == "--scene") scene_file = value();
-      else if (arg == "--force") spec.force = cli::positive_list(value(), arg).at(0);
-      else if (arg == "--speeds") speeds = cli::positive_list(value(), arg);
-      else if (arg == "--middle") {
-        const std::vector<double> m = cli::number_list(value(), arg);
-        if (m.size() != 2) throw std::invalid_argument("--middle: expected X,Y (two numbers, m)");
-        spec.middle = Eigen::Vector2d(m[0], m[1]);
-      } else if (arg == "--half-window") spec.half_window = cli::positive_list(value(), arg).at(0);
-      else if (arg == "--run-in") spec.run_in = cli::positive_list(value(), arg).at(0);
-      else if (arg == "--stiffness") spec.stiffness = cli::positive_list(value(), arg).at(0);
-      else if (arg == "--damping") spec.damping = cli::number(value(), arg);
-      else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
-      else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
-      else if (arg == "--json") json = true;
-      else if (arg == "--csv") csv_file = value();
-      else if (arg == "--quiet") quiet = true;
-      else if (arg == "--help" || arg == "-h") {
-        std::cout << kUsage;
-        return 0;
-      } else throw std::invalid_argument("unknown option '" + arg + "'");
-    }
-    if (scene_file.empty()) throw std::invalid_argument("--scene FILE is required");
-  } catch (const std::exception& e) {
-    std::cerr << "palpate-slide: " << e.what() << "\n\n" << kUsage;
-    return 2;
-  }
+  cli::parse_or_exit(argc, argv, "palpate-slide", kUsage, [&](cli::Arguments& args) {
+    const std::string& arg = args.flag();
+    auto value = [&] { return args.value(); };
+    if (arg == "--scene") scene_file = value();
+    else if (arg == "--force") spec.force = cli::positive_list(value(), arg).at(0);
+    else if (arg == "--speeds") speeds = cli::positive_list(value(), arg);
+    else if (arg == "--middle") {
+      const std::vector<double> m = cli::number_list(value(), arg);
+      if (m.size() != 2) throw std::invalid_argument("--middle: expected X,Y (two numbers, m)");
+      spec.middle = Eigen::Vector2d(m[0], m[1]);
+    } else if (arg == "--half-window") spec.half_window = cli::positive_list(value(), arg).at(0);
+    else if (arg == "--run-in") spec.run_in = cli::positive_list(value(), arg).at(0);
+    else if (arg == "--stiffness") spec.stiffness = cli::positive_list(value(), arg).at(0);
+    else if (arg == "--damping") spec.damping = cli::number(value(), arg);
+    else if (arg == "--per-edge") overrides.emplace_back("body.distribution.per_edge", value());
+    else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
+    else if (arg == "--json") json = true;
+    else if (arg == "--csv") csv_file = value();
+    else if (arg == "--quiet") quiet = true;
+    else return false;
+    return true;
+  });
+  if (scene_file.empty()) cli::usage_error("palpate-slide", "--scene FILE is required", kUsage);
 
   std::optional<Scene> scene;
   std::optional<Model> model;
