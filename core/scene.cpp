@@ -8,6 +8,7 @@
 #include "core/hertz.h"
 #include "core/mesh_reader.h"
 #include "core/node_cloud.h"
+#include "core/resolution.h"
 
 #include <algorithm>
 #include <charconv>
@@ -251,6 +252,7 @@ constexpr Range positive() { return {0.0, kInf, true, true}; }
 struct Origin {
   std::string source;
   std::vector<std::pair<std::string, std::string>> overrides;  // (JSON pointer, "key=value")
+  SceneFiles files = SceneFiles::required;  // whether the files a scene names must exist
 
   std::string source_for(const std::string& field) const {
     if (!field.empty())
@@ -274,6 +276,7 @@ class Reader {
       : value_(value), path_(std::move(path)), origin_(&origin) {}
 
   bool present() const { return value_ != nullptr; }
+  bool files_required() const { return origin_->files == SceneFiles::required; }
 
   [[noreturn]] void fail(const std::string& reason) const {
     throw SceneError(origin_->source_for(path_), path_, reason);
@@ -418,6 +421,7 @@ fs::path resolve_file(const std::string& name, const fs::path& base_dir) {
 
 // Requires `file` (the scene's text `name`, resolved) to exist and not be a folder.
 void require_file(const Reader& r, const std::string& what, const std::string& name, const fs::path& file) {
+  if (!r.files_required()) return;
   std::error_code ec;
   const auto status = fs::status(file, ec);
   if (!fs::exists(status)) r.fail(what + " '" + name + "' not found (resolved to " + file.string() + ")");
@@ -431,7 +435,8 @@ void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base
   r["spacing"].get(d.spacing, at_least(0.0));
   r["jitter"].get(d.jitter, closed_open(0.0, 0.5));
   r["seed"].get(d.seed);
-  r["first_spacing"].get(d.first_spacing, positive());
+  d.first_spacing = 0.0;  // left out or 0: derived from the scene (read_scene, core/resolution.h)
+  r["first_spacing"].get(d.first_spacing, at_least(0.0));
   if (r["focus"].present()) {
     r["focus"].get(d.focus);
     d.focus_given = true;
@@ -646,7 +651,6 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
     r["material"]["law"].fail("applies to the mls model; the hex_fem model's law is hex_fem.formulation");
   read_fixed(r["fixed"], s.fixed_faces);
   read_indenter(r["indenter"], s.indenter);
-  if (s.distribution.type == DistributionType::graded_grid) check_graded_grid(r["body"]["distribution"], s);
   s.contact.tolerance = 0.0;  // left out: derived (derive_scale_defaults)
   read_contact(r["contact"], s.contact);
   read_integrator(r["integrator"], s.integrator);
@@ -655,6 +659,11 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   read_verify(r["verify"], s.verify);
   read_health(r["health"], s.health);
   derive_scale_defaults(s);
+  if (s.distribution.type == DistributionType::graded_grid) {
+    // Left out (0): the spacing the scene's sweep asks for (core/resolution.h).
+    if (s.distribution.first_spacing == 0.0) s.distribution.first_spacing = required_resolution(s).finest_spacing();
+    check_graded_grid(r["body"]["distribution"], s);
+  }
 }
 
 // ---------------------------------------------------------------------------
@@ -746,11 +755,11 @@ std::string apply_override(json& root, const std::string& key, const std::string
 }  // namespace
 
 Scene parse_scene(const std::string& json_text, const std::string& source_name, const fs::path& base_dir,
-                  const SceneOverrides& overrides) {
+                  const SceneOverrides& overrides, SceneFiles files) {
   json root = parse_json(json_text, source_name);
   if (!root.is_object()) throw SceneError(source_name, "", "the top-level value must be an object, got " + describe(root));
 
-  Origin origin{source_name, {}};
+  Origin origin{source_name, {}, files};
   for (const auto& [key, value] : overrides)
     origin.overrides.emplace_back(apply_override(root, key, value, source_name), key + "=" + value);
 
@@ -761,7 +770,7 @@ Scene parse_scene(const std::string& json_text, const std::string& source_name, 
   return scene;
 }
 
-Scene load_scene(const fs::path& file, const SceneOverrides& overrides) {
+Scene load_scene(const fs::path& file, const SceneOverrides& overrides, SceneFiles files) {
   const std::string source = file.string();
   const std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(file.c_str(), "rb"), &std::fclose);
   if (!f) throw SceneError(source, "", std::string("cannot read file: ") + std::strerror(errno));
@@ -770,7 +779,7 @@ Scene load_scene(const fs::path& file, const SceneOverrides& overrides) {
   std::size_t n;
   while ((n = std::fread(buf, 1, sizeof buf, f.get())) > 0) text.append(buf, n);
   if (std::ferror(f.get())) throw SceneError(source, "", std::string("cannot read file: ") + std::strerror(errno));
-  return parse_scene(text, source, file.parent_path(), overrides);
+  return parse_scene(text, source, file.parent_path(), overrides, files);
 }
 
 std::vector<std::string> scene_field_paths() {

@@ -69,7 +69,9 @@ struct DistributionSpec {
   int per_edge = 18;          // nodes per box edge (lattice types) when spacing == 0
   double spacing = 0.0;       // m; > 0 chooses the lattice by spacing instead of per_edge
   double jitter = 0.3;        // jittered_grid: displacement bound as a fraction of the spacing
-  double first_spacing = 0.025;  // graded_grid: the lattice spacing next to the focus, m
+  // graded_grid: the lattice spacing next to the focus, m; the reader's default (absent or 0) is
+  // the spacing the scene's sweep and inclusions ask for (required_resolution, core/resolution.h)
+  double first_spacing = 0.0;
   bool focus_given = false;      // graded_grid: false = the centre of the top face (the indenter's site)
   Vec3 focus{0.0, 0.0, 0.0};     // graded_grid: the point the lattice is graded toward, m
   uint64_t seed = 1;          // jittered_grid: random seed
@@ -194,11 +196,18 @@ struct Scene {
 // path of a field ("body.distribution.per_edge"), value a JSON literal or a bare string.
 using SceneOverrides = std::vector<std::pair<std::string, std::string>>;
 
+// Whether the node or mesh file a scene names must exist when it is read: `not_required`
+// reads the description of a scene whose mesh is still to be made (palpate-resolution);
+// build_model still needs the file.
+enum class SceneFiles { required, not_required };
+
 // Reads and validates a scene file. Throws SceneError naming file, field and reason.
-Scene load_scene(const std::filesystem::path& file, const SceneOverrides& overrides = {});
+Scene load_scene(const std::filesystem::path& file, const SceneOverrides& overrides = {},
+                 SceneFiles files = SceneFiles::required);
 // The same from text; base_dir resolves relative file names inside the scene.
 Scene parse_scene(const std::string& json_text, const std::string& source_name,
-                  const std::filesystem::path& base_dir, const SceneOverrides& overrides = {});
+                  const std::filesystem::path& base_dir, const SceneOverrides& overrides = {},
+                  SceneFiles files = SceneFiles::required);
 
 // The default force sweep: the Hertz loads (docs/physics.md (3.2)) of the depths
 // d = R x (0.02, 0.04, ..., 0.2) with the scene's material and radius (for the default

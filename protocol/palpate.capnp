@@ -94,7 +94,7 @@ struct Distribution {
   jitter @3 :Float64 = 0.3;                            # [0, 0.5), fraction of the spacing
   seed @4 :UInt32 = 1;                                 # jittered_grid (the wire carries 32 bits)
   nodeFile @5 :Text $Json.name("node_file");           # path on the server, relative to --scene-dir
-  firstSpacing @6 :Float64 = 0.025 $Json.name("first_spacing");  # m, > 0; graded_grid: the spacing at the focus
+  firstSpacing @6 :Float64 = 0 $Json.name("first_spacing");  # m, >= 0; graded_grid: the spacing at the focus; 0 = derived
   focus @7 :List(Float64);                             # graded_grid: [x, y, z], m; null = top face under the indenter
   file @8 :Text;                                       # mesh: .msh (gmsh) or .node (+ .ele, TetGen) on the server,
                                                        # relative to --scene-dir

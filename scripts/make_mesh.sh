@@ -16,14 +16,28 @@
 #     --focus-top       grade from the whole top face instead: r is the depth below it
 #                       (a palpation block, fine wherever the tool may touch it)
 #     --top-size H2     with a focus point or a --patch: also at most H2 + (G - 1) x depth
-#                       below the top face, so the whole top face is at most H2 (the focus
-#                       stays finer)
+#                       below the top face (the skin of a --dome), so the whole top face is
+#                       at most H2 (the focus stays finer)
 #     --patch A         with --focus-top: only the square |x - fx|, |y - fy| <= A of the top
 #                       face (fx, fy: the centre of the top face) is the focus; r is the
 #                       distance to it (the palpable part of the face, coarser toward walls)
 #     --seed N          gmsh's Mesh.RandomSeed (default 1); the mesh is deterministic
 #                       for a given gmsh version, seed and options
 #     --format F        msh41 (default) or msh22
+#     --refine X Y Z R H  also at most H inside the ball of radius R about (X, Y, Z), growing
+#                       by G away from it: H + (G - 1) x (distance - R) (an inclusion;
+#                       repeatable)
+#     --dome RB         the body is a hemisphere of radius RB on the plane z = 0 (its
+#                       centre at the origin, its pole at (0, 0, RB)) instead of the box, with
+#                       the physical groups "base" (the flat face, to fix), "skin" (the curved
+#                       face) and "tissue" (the volume); the focus defaults to the pole, and
+#                       --focus-top grades from the whole skin (r = depth below it)
+#     --scene FILE      size the mesh for a scene (core/resolution.h): the focus size is the
+#                       spacing its smallest sweep force asks for (three spacings across the
+#                       Hertz contact radius), every inclusion gets a --refine with four
+#                       spacings across its radius, and the box and focus are the scene's
+#                       (options after --scene override them). Needs palpate-resolution:
+#                       $PALPATE_BIN (default build/bin) or on PATH. Prints what it chose.
 #
 # scenes/meshes/palpation_block.msh (the hand-scale block) is
 #   scripts/make_mesh.sh --box -0.05 -0.05 -0.05 0.05 0.05 0 --focus-size 0.001 --growth 1.2 \
@@ -44,6 +58,8 @@ top_size=
 patch=
 seed=1
 format=msh41
+refines=()
+dome=
 
 die() { echo "make_mesh.sh: $*" >&2; exit 2; }
 number() { [[ "$2" =~ ^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$ ]] || die "$1: expected a number, got '$2'"; }
@@ -65,7 +81,24 @@ while [ $# -gt 0 ]; do
     --patch) number "$1" "${2:-}"; patch=$2; shift 2 ;;
     --seed) [[ "${2:-}" =~ ^[0-9]+$ ]] || die "--seed: expected a non-negative integer"; seed=$2; shift 2 ;;
     --format) case "${2:-}" in msh41|msh22) format=$2 ;; *) die "--format: msh41 or msh22, got '${2:-}'" ;; esac; shift 2 ;;
-    -h|--help) sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --refine) [ $# -ge 6 ] || die "--refine needs 5 numbers (X Y Z R H)"
+              for v in "${@:2:5}"; do number --refine "$v"; done
+              awk -v r="$5" -v h="$6" 'BEGIN { exit !(r > 0 && h > 0) }' || die "--refine: R and H must be positive"
+              refines+=("${*:2:5}"); shift 6 ;;
+    --dome) number "$1" "${2:-}"; dome=$2; shift 2 ;;
+    --scene) scene=${2:?--scene needs a file}
+             tool=${PALPATE_BIN:-build/bin}/palpate-resolution
+             [ -x "$tool" ] || tool=$(command -v palpate-resolution) ||
+               die "--scene needs palpate-resolution (build it, or set PALPATE_BIN to the folder holding it)"
+             values=$("$tool" --scene "$scene" --shell) || die "--scene: palpate-resolution could not read '$scene'"
+             eval "$values"
+             h0=$focus_size
+             read -r -a box <<< "$box"
+             read -r -a focus <<< "$focus"
+             for ((k = 0; k < refine_count; ++k)) { v=refine_$k; refines+=("${!v}"); }
+             echo "make_mesh.sh: $scene asks for $h0 m under the tool at (${focus[*]}), ${refine_count} inclusion(s)" >&2
+             shift 2 ;;
+    -h|--help) sed -n '2,48p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (--help)" ;;
   esac
 done
@@ -75,6 +108,12 @@ awk -v h0="$h0" -v h1="$h1" -v g="$growth" 'BEGIN { exit !(h0 > 0 && h1 >= h0 &&
 awk -v a="${box[0]}" -v b="${box[1]}" -v c="${box[2]}" -v d="${box[3]}" -v e="${box[4]}" -v f="${box[5]}" \
   'BEGIN { exit !(d > a && e > b && f > c) }' || die "--box: max must exceed min on every axis"
 [ $focus_top -eq 0 ] || [ ${#focus[@]} -eq 0 ] || die "--focus and --focus-top exclude each other"
+if [ -n "$dome" ]; then
+  awk -v r="$dome" 'BEGIN { exit !(r > 0) }' || die "--dome: the radius must be positive"
+  [ -z "$patch" ] || die "--patch goes with the box, not --dome"
+  box=(-$dome -$dome 0 $dome $dome $dome)
+  [ ${#focus[@]} -gt 0 ] || [ $focus_top -eq 1 ] || focus=(0 0 $dome)
+fi
 if [ ${#focus[@]} -eq 0 ]; then
   focus=($(awk -v a="${box[0]}" -v b="${box[1]}" -v d="${box[3]}" -v e="${box[4]}" -v f="${box[5]}" \
     'BEGIN { printf "%.17g %.17g %.17g", (a + d) / 2, (b + e) / 2, f }'))
@@ -90,12 +129,20 @@ if ! command -v gmsh >/dev/null; then
 fi
 
 [ -z "$patch" ] || [ $focus_top -eq 1 ] || die "--patch goes with --focus-top"
+# The depth below the top face (the skin of a dome), for --focus-top and --top-size.
+if [ -n "$dome" ]; then
+  depth="($dome - Sqrt(x^2 + y^2 + z^2))"
+  top_name="the skin of the dome"
+else
+  depth="((${box[5]}) - z)"
+  top_name="the top face z = ${box[5]}"
+fi
 if [ $focus_top -eq 1 ] && [ -n "$patch" ]; then
   distance="Sqrt(Max(Fabs(x - (${focus[0]})) - $patch, 0)^2 + Max(Fabs(y - (${focus[1]})) - $patch, 0)^2 + ((${box[5]}) - z)^2)"
   where="the top face within $patch m of (${focus[0]}, ${focus[1]})"
 elif [ $focus_top -eq 1 ]; then
-  distance="((${box[5]}) - z)"
-  where="the top face z = ${box[5]}"
+  distance=$depth
+  where=$top_name
 else
   distance="Sqrt((x - (${focus[0]}))^2 + (y - (${focus[1]}))^2 + (z - (${focus[2]}))^2)"
   where="(${focus[*]})"
@@ -103,17 +150,36 @@ fi
 size="Min($h1, $h0 + ($growth - 1) * $distance)"
 if [ -n "$top_size" ]; then
   [ $focus_top -eq 0 ] || [ -n "$patch" ] || die "--top-size goes with a focus point or a --patch"
-  size="Min($size, $top_size + ($growth - 1) * ((${box[5]}) - z))"
-  where="$where, at most $top_size m on the top face"
+  size="Min($size, $top_size + ($growth - 1) * $depth)"
+  where="$where, at most $top_size m on $top_name"
 fi
+for r in "${refines[@]}"; do
+  read -r rx ry rz rr rh <<< "$r"
+  size="Min($size, $rh + ($growth - 1) * Max(Sqrt((x - ($rx))^2 + (y - ($ry))^2 + (z - ($rz))^2) - $rr, 0))"
+  where="$where, at most $rh m within $rr m of ($rx, $ry, $rz)"
+done
 
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 geo=$work/box.geo
+if [ -n "$dome" ]; then
+  body="Sphere(1) = {0, 0, 0, $dome};
+Box(2) = {-2 * $dome, -2 * $dome, -2 * $dome, 4 * $dome, 4 * $dome, 2 * $dome};
+BooleanDifference(3) = { Volume{1}; Delete; }{ Volume{2}; Delete; };
+eps = 1e-6 * $dome;
+base() = Surface In BoundingBox{-$dome - eps, -$dome - eps, -eps, $dome + eps, $dome + eps, eps};
+skin() = Abs(Boundary{ Volume{3}; });
+skin() -= base();
+Physical Surface(\"base\", 1) = {base()};
+Physical Surface(\"skin\", 2) = {skin()};
+Physical Volume(\"tissue\", 3) = {3};"
+else
+  body="Box(1) = {${box[0]}, ${box[1]}, ${box[2]}, ${box[3]} - (${box[0]}), ${box[4]} - (${box[1]}), ${box[5]} - (${box[2]})};"
+fi
 cat > "$geo" <<EOF
 // Written by scripts/make_mesh.sh
 SetFactory("OpenCASCADE");
-Box(1) = {${box[0]}, ${box[1]}, ${box[2]}, ${box[3]} - (${box[0]}), ${box[4]} - (${box[1]}), ${box[5]} - (${box[2]})};
+$body
 // Element size: h(r) = min(H1, H0 + (G - 1) r), r the distance to the focus (or the depth
 // below the top face), with --top-size also at most H2 + (G - 1) x depth.
 Field[1] = MathEval;

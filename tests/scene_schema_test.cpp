@@ -199,7 +199,9 @@ const std::set<std::string> kDerivedDefaults = {"/name", "/body/distribution/foc
                                                 "/indenter/workspace_min", "/indenter/workspace_max",
                                                 // scale with the indenter radius (core/scene.h)
                                                 "/contact/tolerance", "/verify/forces",
-                                                "/verify/rest/velocity_tolerance"};
+                                                "/verify/rest/velocity_tolerance",
+                                                // from the sweep and the inclusions (core/resolution.h)
+                                                "/body/distribution/first_spacing"};
 
 // "pointer: expected vs actual" for every field where the scenes differ; empty when equal.
 std::string differences(const Scene& expected, const Scene& actual) {

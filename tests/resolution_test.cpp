@@ -1,0 +1,72 @@
+// The spacing a scene asks for (core/resolution.h, docs/physics.md (6.1)-(6.3)), and
+// the graded lattice that takes it when the scene gives no first_spacing.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/resolution.h"
+#include "core/scene.h"
+
+namespace palpate {
+namespace {
+
+Scene scene_of(const std::string& json, const SceneOverrides& overrides = {},
+               SceneFiles files = SceneFiles::required) {
+  return parse_scene(json, "test.json", PALPATE_SOURCE_DIR "/scenes", overrides, files);
+}
+
+// a_min from Hertz written out here: F = 4/3 E* sqrt(R) d^(3/2), a = sqrt(R d).
+double hertz_contact_radius(double F, double R, double E, double nu) {
+  const double E_star = E / (1 - nu * nu);
+  const double d = std::pow(3 * F / (4 * E_star * std::sqrt(R)), 2.0 / 3.0);
+  return std::sqrt(R * d);
+}
+
+TEST(Resolution, ContactSpacingIsAThirdOfTheSmallestContactRadius) {
+  const Scene s = scene_of(R"({"indenter": {"radius": 0.3}, "material": {"young_modulus": 5000, "poisson_ratio": 0.45},
+                               "verify": {"forces": [4, 1, 2]}})");
+  const Resolution r = required_resolution(s);
+  EXPECT_EQ(r.smallest_force, 1.0);
+  const double a = hertz_contact_radius(1.0, 0.3, 5000, 0.45);
+  EXPECT_NEAR(r.smallest_contact_radius, a, 1e-12 * a);
+  EXPECT_NEAR(r.contact_spacing, a / 3, 1e-12 * a);
+  EXPECT_NEAR(r.smallest_depth * 0.3, a * a, 1e-12 * a * a);
+  EXPECT_EQ(r.finest_spacing(), r.contact_spacing);
+}
+
+TEST(Resolution, TheDefaultSweepAsksForTheShippedGradedSpacing) {
+  // d/R = 0.02 at the default R = 0.5 m: a = sqrt(0.5 x 0.01) = 0.0707 m, h = 0.0236 m,
+  // the 0.025 m the accurate graded scenes were tuned to.
+  const Resolution r = required_resolution(scene_of("{}"));
+  EXPECT_NEAR(r.smallest_contact_radius, std::sqrt(0.5 * 0.01), 1e-9);
+  EXPECT_NEAR(r.contact_spacing, std::sqrt(0.005) / 3, 1e-9);
+}
+
+TEST(Resolution, AGradedLatticeWithoutFirstSpacingTakesTheRequiredSpacing) {
+  const std::string json = R"({"body": {"distribution": {"type": "graded_grid", "per_edge": 15}},
+                               "indenter": {"radius": 0.3}, "verify": {"forces": [1, 5]}})";
+  const Scene s = scene_of(json);
+  EXPECT_NEAR(s.distribution.first_spacing, hertz_contact_radius(1.0, 0.3, 1e4, 0.3) / 3, 1e-12);
+  // Given, it is kept; 0 is "derived" as absent is.
+  EXPECT_EQ(scene_of(json, {{"body.distribution.first_spacing", "0.05"}}).distribution.first_spacing, 0.05);
+  EXPECT_EQ(scene_of(json, {{"body.distribution.first_spacing", "0"}}).distribution.first_spacing,
+            s.distribution.first_spacing);
+  // A lattice too coarse for the derived spacing says so at the field.
+  try {
+    scene_of(json, {{"body.distribution.per_edge", "3"}, {"verify.forces", "[1e-6]"}});
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.field(), "/body/distribution/first_spacing") << e.what();
+  }
+}
+
+TEST(Resolution, ASceneWhoseMeshIsStillToBeMadeCanBeReadForItsDescription) {
+  const std::string json =
+      R"({"body": {"distribution": {"type": "mesh", "file": "meshes/not_made_yet.msh"}}, "mls": {"volumes": "mesh"}})";
+  EXPECT_THROW(scene_of(json), SceneError);
+  const Scene s = scene_of(json, {}, SceneFiles::not_required);
+  EXPECT_EQ(s.distribution.type, DistributionType::mesh);
+  EXPECT_GT(required_resolution(s).contact_spacing, 0.0);
+}
+
+}  // namespace
+}  // namespace palpate

@@ -1,0 +1,94 @@
+// palpate-resolution: the particle spacing a scene asks for (core/resolution.h,
+// docs/physics.md §6 "The spacing a scene needs"): across the smallest contact radius of
+// its verification sweep, and across every inclusion. scripts/make_mesh.sh --scene reads
+// its --shell output to size a tetrahedral mesh for the scene.
+#include <cstdio>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "cli/arguments.h"
+#include "core/node_cloud.h"
+#include "core/resolution.h"
+#include "core/scene.h"
+
+namespace {
+
+using namespace palpate;
+
+const char* kUsage = R"(usage: palpate-resolution --scene FILE [options]
+Prints the particle spacing the scene's tool, force sweep and inclusions ask for: three
+spacings across the smallest Hertz contact radius of verify.forces, four across the
+radius of every inclusion. The scene's mesh or node file need not exist yet.
+  --scene FILE      scene file (JSON)
+  --set KEY=VALUE   override a scene field by its dotted path (repeatable)
+  --json            one JSON object on stdout
+  --shell           KEY=VALUE lines for a shell (scripts/make_mesh.sh --scene):
+                    focus_size, focus (x y z), box (6 numbers), refine_count and
+                    refine_K (x y z radius spacing) per inclusion
+Exit status: 0 on success, 1 for a scene that cannot be read, 2 for a usage error.
+)";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene_file;
+  SceneOverrides overrides;
+  bool json = false, shell = false;
+  cli::parse_or_exit(argc, argv, "palpate-resolution", kUsage, [&](cli::Arguments& args) {
+    const std::string& arg = args.flag();
+    if (arg == "--scene") scene_file = args.value();
+    else if (arg == "--set") overrides.push_back(cli::scene_override(args.value()));
+    else if (arg == "--json") json = true;
+    else if (arg == "--shell") shell = true;
+    else return false;
+    return true;
+  });
+  if (scene_file.empty()) cli::usage_error("palpate-resolution", "--scene FILE is required", kUsage);
+  if (json && shell) cli::usage_error("palpate-resolution", "--json and --shell exclude each other", kUsage);
+  Scene scene;
+  try {
+    scene = load_scene(scene_file, overrides, SceneFiles::not_required);
+  } catch (const std::exception& e) {
+    std::cerr << "palpate-resolution: " << e.what() << "\n";
+    return 1;
+  }
+  const Resolution res = required_resolution(scene);
+  const Vec3 focus = graded_focus(scene);
+  if (json) {
+    nlohmann::json out;
+    out["scene"] = scene.name;
+    out["smallest_force"] = res.smallest_force;
+    out["smallest_depth"] = res.smallest_depth;
+    out["smallest_contact_radius"] = res.smallest_contact_radius;
+    out["contact_spacing"] = res.contact_spacing;
+    out["finest_spacing"] = res.finest_spacing();
+    out["focus"] = {focus[0], focus[1], focus[2]};
+    out["inclusions"] = nlohmann::json::array();
+    for (const RegionResolution& r : res.inclusions)
+      out["inclusions"].push_back(
+          {{"center", {r.center[0], r.center[1], r.center[2]}}, {"radius", r.radius}, {"spacing", r.spacing}});
+    std::cout << out.dump(2) << "\n";
+  } else if (shell) {
+    std::printf("focus_size=%.9g\n", res.contact_spacing);
+    std::printf("focus='%.17g %.17g %.17g'\n", focus[0], focus[1], focus[2]);
+    std::printf("box='%.17g %.17g %.17g %.17g %.17g %.17g'\n", scene.box.min[0], scene.box.min[1], scene.box.min[2],
+                scene.box.max[0], scene.box.max[1], scene.box.max[2]);
+    std::printf("refine_count=%zu\n", res.inclusions.size());
+    for (size_t k = 0; k < res.inclusions.size(); ++k) {
+      const RegionResolution& r = res.inclusions[k];
+      std::printf("refine_%zu='%.17g %.17g %.17g %.17g %.9g'\n", k, r.center[0], r.center[1], r.center[2], r.radius,
+                  r.spacing);
+    }
+  } else {
+    std::printf("%s: the smallest sweep force %.4g N gives a Hertz depth %.4g m and contact radius %.4g m\n",
+                scene.name.c_str(), res.smallest_force, res.smallest_depth, res.smallest_contact_radius);
+    std::printf("  spacing under the tool: <= %.4g m (%.0f across the contact radius)\n", res.contact_spacing,
+                kSpacingsPerContactRadius);
+    for (const RegionResolution& r : res.inclusions)
+      std::printf("  inclusion at (%.4g, %.4g, %.4g), radius %.4g m: spacing <= %.4g m\n", r.center[0], r.center[1],
+                  r.center[2], r.radius, r.spacing);
+    std::printf("  finest: %.4g m\n", res.finest_spacing());
+  }
+  return 0;
+}
