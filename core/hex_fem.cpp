@@ -1,5 +1,7 @@
 #include "core/hex_fem.h"
 
+#include "core/hex_neo_hookean.h"
+
 #include <Eigen/Geometry>
 #include <cmath>
 #include <map>
@@ -115,6 +117,16 @@ HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lam
         if (inserted) {
           mesh.element_size.push_back(size);
           mesh.element_stiffness.push_back(hex_element_stiffness(size, lambda, mu, volumetric));
+          std::array<BrickGradients, 8> gauss;
+          const double g = 1.0 / std::sqrt(3.0);
+          for (int q = 0; q < 8; ++q) {
+            const double xi[3] = {g * kCorner[q][0], g * kCorner[q][1], g * kCorner[q][2]};
+            gauss[q] = brick_shape_gradients(size, xi);
+          }
+          mesh.gauss_gradients.push_back(gauss);
+          mesh.gauss_weight.push_back(size.prod() / 8.0);
+          mesh.type_lambda.push_back(lambda);
+          mesh.type_mu.push_back(mu);
         }
         mesh.element_nodes.push_back(nodes);
         mesh.element_type.push_back(it->second);
@@ -139,6 +151,7 @@ Mat3 hex_element_rotation(const Points& x, const std::array<int, 8>& nodes, cons
 
 void hex_internal_forces(const HexMesh& mesh, const Points& rest, const Points& x, Points& f) {
   f.setZero();
+  if (mesh.formulation == HexFormulation::neo_hookean) return hex_neo_hookean_add_forces(mesh, x, f);
   const bool corotational = mesh.formulation == HexFormulation::corotational;
   for (int e = 0; e < mesh.element_count; ++e) {
     const auto& nodes = mesh.element_nodes[e];
@@ -153,6 +166,7 @@ void hex_internal_forces(const HexMesh& mesh, const Points& rest, const Points& 
 }
 
 double hex_strain_energy(const HexMesh& mesh, const Points& rest, const Points& x) {
+  if (mesh.formulation == HexFormulation::neo_hookean) return hex_neo_hookean_energy(mesh, x);
   double U = 0;
   const bool corotational = mesh.formulation == HexFormulation::corotational;
   for (int e = 0; e < mesh.element_count; ++e) {
@@ -167,6 +181,7 @@ double hex_strain_energy(const HexMesh& mesh, const Points& rest, const Points& 
 }
 
 void hex_linearize(const HexMesh& mesh, const Points& x, std::vector<double>& cached_rotation) {
+  if (mesh.formulation == HexFormulation::neo_hookean) return hex_neo_hookean_linearize(mesh, x, cached_rotation);
   cached_rotation.resize(9 * static_cast<size_t>(mesh.element_count));
   for (int e = 0; e < mesh.element_count; ++e) {
     Eigen::Map<Mat3> R(&cached_rotation[9 * static_cast<size_t>(e)]);
@@ -178,6 +193,8 @@ void hex_linearize(const HexMesh& mesh, const Points& x, std::vector<double>& ca
 
 void hex_force_differential(const HexMesh& mesh, const std::vector<double>& cached_rotation, const Points& dx,
                             Points& df) {
+  if (mesh.formulation == HexFormulation::neo_hookean)
+    return hex_neo_hookean_force_differential(mesh, cached_rotation, dx, df);
   df.setZero();
   const bool corotational = mesh.formulation == HexFormulation::corotational;
   for (int e = 0; e < mesh.element_count; ++e) {

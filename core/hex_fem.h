@@ -3,7 +3,8 @@
 // lattice of the scene's box, 2x2x2 Gauss integration, isotropic linear
 // elasticity, in a linear small-strain and a corotational variant (the
 // "large" method of SOFA's HexahedronFEMForceField: the element rotation is
-// taken from its deformed edges, forces f_e = -R_e K_e (R_e^T x_e - X_e)).
+// taken from its deformed edges, forces f_e = -R_e K_e (R_e^T x_e - X_e)), and the
+// total-Lagrangian neo-Hookean bricks of core/hex_neo_hookean.h.
 // Lumped masses are the lattice volumes times the density.
 #include <array>
 #include <vector>
@@ -16,6 +17,10 @@
 namespace palpate {
 
 using ElementMatrix = Eigen::Matrix<double, 24, 24>;  // dofs: node a, component c -> 3 a + c
+// dN_a/dx (column a, local node order below) of the trilinear shape functions of an
+// hx x hy x hz brick at natural coordinates xi in [-1, 1]^3.
+using BrickGradients = Eigen::Matrix<double, 3, 8>;
+BrickGradients brick_shape_gradients(const Eigen::Vector3d& size, const double xi[3]);
 
 // The mesh and everything precomputed from it (part of the Model for "hex_fem").
 struct HexMesh {
@@ -27,12 +32,14 @@ struct HexMesh {
   std::vector<int> element_type;                  // element_count: index into the arrays below
   std::vector<ElementMatrix> element_stiffness;   // K_e per distinct element size (A regular grid has one.)
   std::vector<Eigen::Vector3d> element_size;      // edge lengths (hx, hy, hz) per distinct element size
+  // Per element type, for the neo-Hookean formulation (core/hex_neo_hookean.h): the shape
+  // gradients at the 2x2x2 Gauss points (+-1/sqrt 3)^3 in kCorner order, the Gauss weight
+  // hx hy hz / 8, and the Lame parameters, Pa.
+  std::vector<std::array<BrickGradients, 8>> gauss_gradients;
+  std::vector<double> gauss_weight;
+  std::vector<double> type_lambda, type_mu;
 };
 
-// dN_a/dx (column a, local node order above) of the trilinear shape functions of an
-// hx x hy x hz brick at natural coordinates xi in [-1, 1]^3.
-using BrickGradients = Eigen::Matrix<double, 3, 8>;
-BrickGradients brick_shape_gradients(const Eigen::Vector3d& size, const double xi[3]);
 
 // K_e of an hx x hy x hz brick, Lame parameters lambda, mu: 2x2x2 Gauss points, or
 // (volumetric = reduced) the lambda part at the centre only (selective reduced integration).
@@ -55,7 +62,8 @@ void hex_internal_forces(const HexMesh& mesh, const Points& rest, const Points& 
 // its rotated frame; u' = x - X for the linear formulation), J.
 double hex_strain_energy(const HexMesh& mesh, const Points& rest, const Points& x);
 // Tangent stiffness, matrix-free: rotations (9 per element) cached at x, then
-// df = -R K R^T dx per element (exact for linear; SOFA's approximation for corotational).
+// df = -R K R^T dx per element (exact for linear; SOFA's approximation for corotational);
+// neo-Hookean: F and F^-T at the Gauss points cached, the exact tangent (5.6).
 void hex_linearize(const HexMesh& mesh, const Points& x, std::vector<double>& cached_rotation);
 void hex_force_differential(const HexMesh& mesh, const std::vector<double>& cached_rotation, const Points& dx,
                             Points& df);

@@ -54,6 +54,7 @@ constexpr std::string_view kModels[] = {"mls", "hex_fem"};
 constexpr Named<HexFormulation> kHexFormulations[] = {
     {"linear", HexFormulation::linear},
     {"corotational", HexFormulation::corotational},
+    {"neo_hookean", HexFormulation::neo_hookean},
 };
 constexpr Named<HexVolumetricIntegration> kHexVolumetricIntegrations[] = {
     {"full", HexVolumetricIntegration::full},
@@ -538,6 +539,10 @@ void read_hex_fem(const Reader& r, HexFemSpec& h) {
   r.object(kHexFemKeys);
   r["formulation"].get(h.formulation, "formulation", kHexFormulations);
   r["volumetric_integration"].get(h.volumetric_integration, "volumetric integration", kHexVolumetricIntegrations);
+  if (h.formulation == HexFormulation::neo_hookean && h.volumetric_integration == HexVolumetricIntegration::reduced)
+    r["volumetric_integration"].fail(
+        "the neo_hookean formulation integrates fully (2x2x2 Gauss points); 'reduced' applies to linear and "
+        "corotational");
 }
 
 void read_material(const Reader& r, MaterialSpec& m) {

@@ -94,7 +94,8 @@ struct MlsSpec {
 };
 
 // The hexahedral FEM reference model (model "hex_fem", docs/physics.md §5).
-enum class HexFormulation { linear, corotational };
+// small strain, corotational ("large"), or the total-Lagrangian neo-Hookean bricks (1.13)
+enum class HexFormulation { linear, corotational, neo_hookean };
 // Quadrature of the volumetric (lambda) part of K_e: 2x2x2 Gauss points like the
 // rest ("full"), or one point at the centre ("reduced": selective reduced
 // integration, free of volumetric locking as nu -> 1/2).

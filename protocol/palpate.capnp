@@ -68,6 +68,7 @@ enum IntegratorType {
 enum HexFormulation {
   linear @0;
   corotational @1;
+  neoHookean @2 $Json.name("neo_hookean");
 }
 enum HexVolumetricIntegration {
   full @0;                       # 2x2x2 Gauss points like the rest of K_e

@@ -54,6 +54,9 @@ compares the indentation d with Hertz theory.
   --solve MODE        dynamic (default): step the scene's integrator until rest;
                       static: the quasi-static solve (exact for the linear hex FEM,
                       pseudo-transient continuation for the nonlinear models)
+  --surface-radius RB the body's surface under the tool is a sphere of radius RB (a dome
+                      pressed at its pole): Hertz with the radius R RB / (R + RB) of the
+                      two curvatures, docs/physics.md (3.6); no finite-layer column
   --reference WHAT    the finite-block reference (palpate-reference) the errors are
                       also measured against: auto (default; a stored reference with the
                       scene's key in the scene folder's references/), FILE, compute
@@ -95,6 +98,7 @@ int main(int argc, char** argv) {
   std::vector<double> forces;
   bool json = false, quiet = false, static_solve = false;
   std::string reference_choice = "auto";
+  double surface_radius = 0;  // m, 0: a flat body
   double trace_interval = 0;
   std::optional<std::vector<double>> site;  // --site X,Y
   try {
@@ -116,6 +120,7 @@ int main(int argc, char** argv) {
           throw std::invalid_argument("--solve: expected dynamic or static, got '" + mode + "'");
         static_solve = mode == "static";
       } else if (arg == "--reference") reference_choice = value();
+      else if (arg == "--surface-radius") surface_radius = args.number(1e-9, 1e9);
       else if (arg == "--site") {
         site = cli::number_list(value(), "--site");
         if (site->size() != 2) throw std::invalid_argument("--site: expected X,Y (two numbers, m)");
@@ -158,6 +163,8 @@ int main(int argc, char** argv) {
 
   const MaterialSpec& mat = scene.material;
   const double R = model.indenter_radius;
+  // Hertz's radius: the tool's, or with a curved body the two curvatures' (3.6).
+  const double R_hertz = surface_radius > 0 ? R * surface_radius / (R + surface_radius) : R;
   const double E_star = hertz::effective_modulus(mat.young_modulus, mat.poisson_ratio);
   const double thickness = scene.box.max[2] - scene.box.min[2];
   if (forces.empty()) forces = scene.verify.forces;
@@ -214,9 +221,11 @@ int main(int argc, char** argv) {
   for (size_t k = 0; k < forces.size(); ++k) {
     Row row;
     row.force = forces[k];
-    row.d_hertz = hertz::depth(row.force, R, E_star);
+    row.d_hertz = hertz::depth(row.force, R_hertz, E_star);
     try {
-      row.d_layer = hertz::depth_finite_layer(row.force, R, mat.young_modulus, mat.poisson_ratio, thickness);
+      row.d_layer = surface_radius > 0
+                        ? NAN  // the finite layer is a flat one
+                        : hertz::depth_finite_layer(row.force, R, mat.young_modulus, mat.poisson_ratio, thickness);
     } catch (const std::domain_error&) {
       row.d_layer = NAN;
     }
@@ -303,6 +312,7 @@ int main(int argc, char** argv) {
     out["poisson_ratio"] = scene.material.poisson_ratio;
     out["indenter_radius"] = scene.indenter.radius;
     out["site"] = {site_x, site_y};  // m, the (x, y) of the top face pressed
+    out["hertz_radius"] = R_hertz;   // m, R, or (3.6) with --surface-radius
     out["total_volume"] = model.total_volume;
     out["box_volume"] = model.box_volume;
     out["mesh_tetrahedra"] = model.mesh_tetrahedra;
