@@ -355,7 +355,9 @@ Model build_model(const Scene& scene) {
   m.mesh_tetrahedra = cloud.mesh_tetrahedra;
   m.mesh_unused_nodes = cloud.mesh_unused_nodes;
   m.surface_triangles = cloud_surface(cloud);
-  m.box_volume = (scene.box.max - scene.box.min).prod();
+  // A mesh body without a box: its own volume (the sum of its tetrahedra's).
+  m.box_volume = scene.box_given ? (scene.box.max - scene.box.min).prod()
+                                 : std::accumulate(cloud.mesh_volume.begin(), cloud.mesh_volume.end(), 0.0);
   set_material(m, scene.material);
   if (scene.model == "mls")
     build_mls(m, scene, cloud);

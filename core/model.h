@@ -99,7 +99,7 @@ struct Model {
   int regularized_count = 0;      // particles whose moment matrix needed regularisation
   double worst_condition = 0.0;   // largest cond(A_i) before regularisation
   double total_volume = 0.0;      // sum v_i, m^3 (compare with box_volume)
-  double box_volume = 0.0;        // m^3
+  double box_volume = 0.0;        // m^3: the scene's box; a mesh body without /body/box: the mesh's volume
   double min_spacing = 0.0;       // smallest nearest-neighbour distance (FEM: element edge), m
   double max_spacing = 0.0;       // largest nearest-neighbour distance (FEM: element edge), m
   double wave_speed = 0.0;        // p-wave speed sqrt((lambda + 2 mu) / rho), m/s

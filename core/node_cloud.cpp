@@ -206,6 +206,7 @@ NodeCloud mesh_node_cloud(const Scene& scene) {
     return s.str();
   };
   const std::string name = scene.distribution.mesh_file.string();
+  if (!scene.box_given) return mesh_cloud(mesh);  // a body of any shape
   if ((lo - box.min).cwiseAbs().maxCoeff() > tolerance || (hi - box.max).cwiseAbs().maxCoeff() > tolerance)
     throw SceneError(scene.source, field,
                      "the mesh " + name + " spans " + text(lo) + " ... " + text(hi) + ", not /body/box " +

@@ -58,8 +58,9 @@ NodeCloud load_node_list(const std::filesystem::path& file);
 
 // The vertices of the tetrahedral mesh distribution.mesh_file (core/mesh_reader.h) with
 // their nodal volumes, tetrahedra, regions, physical surface node sets and boundary faces.
-// The mesh must fill the scene's box: its bounding box and the tetrahedra's total volume
-// must equal the box's to 1e-6 (relative), else a SceneError at /body/distribution/file.
+// With /body/box given (Scene::box_given) the mesh must fill it: its bounding box and the
+// tetrahedra's total volume must equal the box's to 1e-6 (relative), else a SceneError at
+// /body/distribution/file; without it the mesh may have any shape (a dome, a sphere).
 // Reader errors are std::runtime_error naming file and line.
 NodeCloud mesh_node_cloud(const Scene& scene);
 

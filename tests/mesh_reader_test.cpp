@@ -734,9 +734,11 @@ TEST(MeshScene, ModelOfTheSmallMeshReportsItsCloud) {
 }
 
 TEST(MeshScene, TheMeshMustFillTheBox) {
-  // The unit-cube mesh against the default 2 m cube.
+  // The unit-cube mesh against the 2 m cube (given: without a box any shape is accepted).
   try {
-    build_model(parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh"})", ""), "inline", kData));
+    build_model(parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh"})",
+                                       R"("box": {"min": [-1, -1, -2], "max": [1, 1, 0]}, )"),
+                            "inline", kData));
     ADD_FAILURE() << "accepted";
   } catch (const SceneError& e) {
     EXPECT_EQ(e.field(), "/body/distribution/file");
@@ -771,6 +773,17 @@ TEST(MeshScene, TheMeshMustFillTheBox) {
                                           "inline", kData));
   EXPECT_EQ(m.particle_count, 9);
   EXPECT_NEAR(m.total_volume, 1.0, 1e-15);
+}
+
+TEST(MeshScene, WithoutABoxTheMeshKeepsItsShape) {
+  const Scene scene = parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh"})", ""), "inline", kData);
+  EXPECT_FALSE(scene.box_given);
+  const Model m = build_model(scene);
+  const TetMesh mesh = read_mesh(kData / "cube_tet_small.msh");
+  EXPECT_NEAR(m.box_volume, mesh.total_volume, 1e-15);  // the mesh's own volume
+  EXPECT_TRUE(parse_scene(mesh_scene("cube_tet_small.msh"), "inline", kData).box_given);
+  // Lattices keep the (default) box.
+  EXPECT_TRUE(parse_scene(R"({"body": {"distribution": {"type": "grid"}}})", "inline", kData).box_given);
 }
 
 TEST(MeshScene, ReaderErrorsNameTheFileAndLine) {

@@ -13,6 +13,9 @@
 #include "core/mesh_reader.h"
 #include "core/model.h"
 #include "core/node_cloud.h"
+#include "core/options.h"
+#include "core/state.h"
+#include "core/step.h"
 #include "core/scene.h"
 #include "core/surface.h"
 
@@ -192,6 +195,44 @@ TEST(ModelSurface, LatticeMeshAndNodeList) {
   expect_closed(mesh.surface_triangles, mesh.particle_count);
   EXPECT_NEAR(sums(mesh.rest_position, mesh.surface_triangles).volume, 1.0, 1e-12);
   EXPECT_NEAR(mesh.touch_height, 1.0 + 0.3, 1e-15);
+}
+
+// An MLS body of any shape: the dome mesh without a box, its base ("bottom": the lowest
+// nodes of its bounding box, the physical surface "base") fixed. The touch height at the pole
+// (the tool placed just above it) is pole + R; the surface is the mesh's closed boundary; a short
+// press stays healthy.
+TEST(ModelSurface, DomeWithoutABox) {
+  const Scene scene = parse_scene(
+      R"({"body": {"distribution": {"type": "mesh", "file": "dome.msh"}},
+          "mls": {"volumes": "mesh", "neighbors": 20, "support_rule": "kth_distance", "support_factor": 1.1},
+          "material": {"young_modulus": 5000, "poisson_ratio": 0.3, "density": 1000},
+          "fixed": ["bottom"],
+          "indenter": {"radius": 0.01, "mass": 0.01, "force": 0.02, "position": [0, 0, 0.0601]},
+          "integrator": {"type": "implicit_euler", "dt": 0.001, "damping": 20}})",
+      "inline", kData);
+  ASSERT_FALSE(scene.box_given);
+  const Model m = build_model(scene);
+  const fs::path file = kData / "dome.msh";
+  const TetMesh mesh = read_mesh(file);
+  EXPECT_EQ(m.fixed_count, static_cast<int>(surface_group_nodes(mesh, file, "base").size()));
+  EXPECT_NEAR(m.box_volume, mesh.total_volume, 1e-15);
+  int pole = 0;
+  for (int i = 0; i < m.particle_count; ++i)
+    if (m.rest_position(2, i) > m.rest_position(2, pole)) pole = i;
+  ASSERT_NEAR(m.rest_position(0, pole), 0.0, 1e-12);
+  EXPECT_NEAR(m.touch_height, m.rest_position(2, pole) + 0.01, 1e-15);
+  EXPECT_EQ(m.surface_triangles.cols(), static_cast<Eigen::Index>(mesh.boundary_faces.size()));
+  expect_closed(m.surface_triangles, m.particle_count);
+  const Options opt = options_of(scene);
+  State state = make_state(m, opt);
+  for (int k = 0; k < 300; ++k) {
+    const StepStatus status = step(m, opt, state);
+    ASSERT_FALSE(is_fault(status)) << to_string(status) << " at step " << k;
+  }
+  EXPECT_TRUE(state.position.allFinite());
+  const double depth = m.touch_height - state.indenter_center[2];
+  EXPECT_GT(depth, 0.0);           // it presses in
+  EXPECT_LT(depth, 0.2 * 0.01);    // a small force: a shallow dent (Hertz: about 1.5e-3 m)
 }
 
 }  // namespace
