@@ -15,6 +15,7 @@
 #include "core/model.h"
 #include "core/neighbors.h"
 #include "core/node_cloud.h"
+#include "core/surface.h"
 
 namespace palpate {
 
@@ -310,6 +311,12 @@ void set_boundary_and_indenter(Model& m, const Scene& scene) {
   // the sphere starts resting on the particles, which may already be below that by the
   // strain-free sinking between them.
   m.touch_height = surface + m.indenter_radius;
+  // With a surface: the first contact of the sphere with its triangles (2.16); a flat top
+  // gives the same Z_top + R.
+  const double surface_contact = sphere_first_contact_height(m.rest_position, m.surface_triangles,
+                                                             m.indenter_start[0], m.indenter_start[1],
+                                                             m.indenter_radius);
+  if (std::isfinite(surface_contact)) m.touch_height = surface_contact;
   if (!scene.indenter.position_given) m.indenter_start[2] = first_contact;
   // The tool's workspace.
   const Vec3 margin = Vec3::Constant(2 * m.indenter_radius);
@@ -347,7 +354,10 @@ Model build_model(const Scene& scene) {
   m.rest_position = cloud.positions;
   m.mesh_tetrahedra = cloud.mesh_tetrahedra;
   m.mesh_unused_nodes = cloud.mesh_unused_nodes;
-  m.box_volume = (scene.box.max - scene.box.min).prod();
+  m.surface_triangles = cloud_surface(cloud);
+  // A mesh body without a box: its own volume (the sum of its tetrahedra's).
+  m.box_volume = scene.box_given ? (scene.box.max - scene.box.min).prod()
+                                 : std::accumulate(cloud.mesh_volume.begin(), cloud.mesh_volume.end(), 0.0);
   set_material(m, scene.material);
   if (scene.model == "mls")
     build_mls(m, scene, cloud);

@@ -18,7 +18,9 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <map>
 #include <unordered_map>
+#include <utility>
 
 namespace palpate {
 
@@ -201,6 +203,9 @@ struct RawMesh {
   std::vector<std::array<int64_t, 4>> tets;    // node indices into `nodes` (resolved)
   std::vector<int> tet_line;
   std::vector<int64_t> tet_tag;                // the element's number in the file
+  std::vector<int64_t> tet_region;             // physical volume tag (TetGen: region attribute), 0 = none
+  std::vector<std::array<int64_t, 3>> triangles;  // gmsh triangles of a physical surface (indices into `nodes`)
+  std::vector<int64_t> triangle_group;         // their physical surface tag
   int64_t ignored_elements = 0;
   std::vector<PhysicalName> physical_names;
 };
@@ -303,6 +308,43 @@ void check_one_part(const RawMesh& raw, const std::vector<std::array<int64_t, 4>
               tetrahedra(by_face.size[by_face.root(first)]) + ", the largest part has " +
               std::to_string(by_face.size[largest]) + " (tetrahedron " + std::to_string(raw.tet_tag[first_largest]) +
               ", line " + std::to_string(raw.tet_line[first_largest]) + "); mesh one volume, or remove the other parts");
+}
+
+// The faces of exactly one tetrahedron, each ordered so that its normal
+// (x_b - x_a) x (x_c - x_a) points away from the tetrahedron's fourth node (outward).
+std::vector<std::array<int, 3>> boundary_faces(const Points& X, const std::vector<std::array<int, 4>>& tets) {
+  struct Face {
+    std::array<int, 3> key;  // sorted
+    std::array<int, 3> v;    // as taken from the tetrahedron
+    int opposite;
+  };
+  std::vector<Face> faces;
+  faces.reserve(4 * tets.size());
+  for (const auto& t : tets)
+    for (int skip = 0; skip < 4; ++skip) {
+      Face f{{}, {}, t[skip]};
+      int k = 0;
+      for (int a = 0; a < 4; ++a)
+        if (a != skip) f.v[k++] = t[a];
+      f.key = f.v;
+      std::sort(f.key.begin(), f.key.end());
+      faces.push_back(f);
+    }
+  std::sort(faces.begin(), faces.end(), [](const Face& a, const Face& b) { return a.key < b.key; });
+  std::vector<std::array<int, 3>> out;
+  for (size_t k = 0; k < faces.size();) {
+    size_t end = k + 1;
+    while (end < faces.size() && faces[end].key == faces[k].key) ++end;
+    if (end == k + 1) {
+      std::array<int, 3> v = faces[k].v;
+      const Vec3 a = X.col(v[0]);
+      const Vec3 normal = (X.col(v[1]) - a).cross(X.col(v[2]) - a);
+      if (normal.dot(X.col(faces[k].opposite) - a) > 0) std::swap(v[1], v[2]);
+      out.push_back(v);
+    }
+    k = end;
+  }
+  return out;
 }
 
 // Checks the tetrahedra, drops mid-edge nodes, lumps the volumes. Messages name
@@ -413,6 +455,27 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
     for (int v : tet) mesh.nodal_volume[v] += 0.25 * volume[t];
     mesh.total_volume += volume[t];
   }
+  mesh.tetrahedron_region = raw.tet_region;
+  mesh.tetrahedron_region.resize(raw.tets.size(), 0);
+  mesh.boundary_faces = boundary_faces(mesh.positions, mesh.tetrahedra);
+
+  // Physical surface groups: the kept nodes of their triangles (every triangle node is a
+  // tetrahedron's node: the unused-node check above refused the others).
+  std::map<int64_t, std::vector<int>> group_nodes;
+  for (size_t k = 0; k < raw.triangles.size(); ++k) {
+    std::vector<int>& nodes = group_nodes[raw.triangle_group[k]];
+    for (int64_t v : raw.triangles[k]) nodes.push_back(static_cast<int>(new_index[v]));
+  }
+  for (auto& [tag, nodes] : group_nodes) {
+    std::sort(nodes.begin(), nodes.end());
+    nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+    SurfaceGroup g;
+    g.tag = tag;
+    for (const PhysicalName& p : mesh.physical_names)
+      if (p.dimension == 2 && p.tag == tag) g.name = p.name;
+    g.nodes = std::move(nodes);
+    mesh.surface_groups.push_back(std::move(g));
+  }
   return mesh;
 }
 
@@ -515,10 +578,21 @@ void read_nodes_v2(Lexer& lex, RawMesh& raw, NodeTags& tags, int64_t max_nodes) 
 }
 
 // A 4-node tetrahedron's node tags (gmsh); resolved later.
+// A 4-node tetrahedron or a 3-node triangle (node tags, resolved later) with its
+// physical group: 2.2 gives it directly, 4.1 through its entity's ($Entities).
 struct GmshTet {
   int64_t tag;
   std::array<int64_t, 4> nodes;
   int line;
+  int64_t physical = 0;  // 2.2: the first tag; 4.1: resolved from `entity`
+  int64_t entity = 0;    // 4.1: the element block's entity tag
+};
+struct GmshTriangle {
+  int64_t tag;
+  std::array<int64_t, 3> nodes;
+  int line;
+  int64_t physical = 0;
+  int64_t entity = 0;
 };
 
 void read_tet_nodes(Lexer& lex, int64_t tag, std::vector<GmshTet>& tets) {
@@ -529,9 +603,39 @@ void read_tet_nodes(Lexer& lex, int64_t tag, std::vector<GmshTet>& tets) {
   tets.push_back(t);
 }
 
+void read_triangle_nodes(Lexer& lex, int64_t tag, std::vector<GmshTriangle>& triangles) {
+  GmshTriangle t{tag, {}, 0};
+  for (int a = 0; a < 3; ++a) t.nodes[a] = lex.integer("nodeTag", 1, kMaxTag);
+  t.line = lex.line();
+  lex.end_of_line("the three nodes of a triangle");
+  triangles.push_back(t);
+}
+
+constexpr int kGmshTriangle = 2;     // gmsh element type of the 3-node triangle
 constexpr int kGmshTetrahedron = 4;  // gmsh element type of the 4-node tetrahedron
 
-void read_elements_v41(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
+// $Entities (4.1): the physical tags of each (dimension, entity tag).
+using EntityPhysicals = std::map<std::pair<int64_t, int64_t>, std::vector<int64_t>>;
+
+void read_entities_v41(Lexer& lex, EntityPhysicals& physicals) {
+  int64_t count[4];
+  for (int d = 0; d < 4; ++d) count[d] = lex.integer("number of entities", 0, kMaxTag);
+  for (int d = 0; d < 4; ++d)
+    for (int64_t k = 0; k < count[d]; ++k) {
+      const int64_t tag = lex.integer("entity tag", -kMaxTag, kMaxTag);
+      for (int c = 0; c < (d == 0 ? 3 : 6); ++c) lex.real(d == 0 ? "point coordinate" : "bounding box coordinate");
+      const int64_t n = lex.integer("numPhysicalTags", 0, 1000000);
+      std::vector<int64_t>& tags = physicals[{d, tag}];
+      for (int64_t p = 0; p < n; ++p) tags.push_back(lex.integer("physicalTag", -kMaxTag, kMaxTag));
+      if (d > 0) {
+        const int64_t bounding = lex.integer("number of bounding entities", 0, 1000000);
+        for (int64_t b = 0; b < bounding; ++b) lex.integer("bounding entity tag", -kMaxTag, kMaxTag);
+      }
+      lex.end_of_line("an entity");
+    }
+}
+
+void read_elements_v41(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets, std::vector<GmshTriangle>& triangles) {
   const int64_t blocks = lex.integer("numEntityBlocks", 0, kMaxTag);
   const int64_t count = lex.integer("numElements", 0, kMaxTag);
   lex.integer("minElementTag", 0, kMaxTag);
@@ -539,7 +643,7 @@ void read_elements_v41(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
   int64_t read = 0;
   for (int64_t b = 0; b < blocks; ++b) {
     lex.integer("entityDim", 0, 3);
-    lex.integer("entityTag", -kMaxTag, kMaxTag);
+    const int64_t entity = lex.integer("entityTag", -kMaxTag, kMaxTag);
     const int64_t type = lex.integer("elementType", 1, 1000);
     const int64_t in_block = lex.integer("numElementsInBlock", 0, kMaxTag);
     if (in_block > count - read)
@@ -550,6 +654,11 @@ void read_elements_v41(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
       const int64_t tag = lex.integer("elementTag", 1, kMaxTag);
       if (type == kGmshTetrahedron) {
         read_tet_nodes(lex, tag, tets);
+        tets.back().entity = entity;
+      } else if (type == kGmshTriangle) {
+        read_triangle_nodes(lex, tag, triangles);
+        triangles.back().entity = entity;
+        ++raw.ignored_elements;  // not a particle's element
       } else {  // one element per line: its node count need not be known
         lex.skip_line();
         ++raw.ignored_elements;
@@ -562,19 +671,30 @@ void read_elements_v41(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
              std::to_string(count));
 }
 
-void read_elements_v2(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets) {
+void read_elements_v2(Lexer& lex, RawMesh& raw, std::vector<GmshTet>& tets, std::vector<GmshTriangle>& triangles) {
   const int64_t count = lex.integer("number-of-elements", 0, kMaxTag);
   for (int64_t k = 0; k < count; ++k) {
     const int64_t tag = lex.integer("elm-number", 1, kMaxTag);
     const int64_t type = lex.integer("elm-type", 1, 1000);
     const int64_t tag_count = lex.integer("number-of-tags", 0, 1000);
-    if (type != kGmshTetrahedron) {
+    if (type != kGmshTetrahedron && type != kGmshTriangle) {
       lex.skip_line();
       ++raw.ignored_elements;
       continue;
     }
-    for (int64_t t = 0; t < tag_count; ++t) lex.integer("tag", -kMaxTag, kMaxTag);
-    read_tet_nodes(lex, tag, tets);
+    int64_t physical = 0;  // the first tag
+    for (int64_t t = 0; t < tag_count; ++t) {
+      const int64_t value = lex.integer("tag", -kMaxTag, kMaxTag);
+      if (t == 0) physical = value;
+    }
+    if (type == kGmshTetrahedron) {
+      read_tet_nodes(lex, tag, tets);
+      tets.back().physical = physical;
+    } else {
+      read_triangle_nodes(lex, tag, triangles);
+      triangles.back().physical = physical;
+      ++raw.ignored_elements;
+    }
   }
 }
 
@@ -635,8 +755,10 @@ TetMesh read_gmsh(const fs::path& file, int64_t max_nodes) {
   RawMesh raw;
   NodeTags tags;
   std::vector<GmshTet> tets;
+  std::vector<GmshTriangle> triangles;
+  EntityPhysicals entity_physicals;
   GmshVersion version = GmshVersion::none;
-  bool nodes_seen = false, elements_seen = false, names_seen = false;
+  bool nodes_seen = false, elements_seen = false, names_seen = false, entities_seen = false;
   std::string_view token;
   while (lex.next(token)) {
     if (version == GmshVersion::none && token != "$MeshFormat")
@@ -654,13 +776,18 @@ TetMesh read_gmsh(const fs::path& file, int64_t max_nodes) {
     } else if (name == "Elements") {
       if (elements_seen) lex.fail("a second $Elements section");
       elements_seen = true;
-      if (version == GmshVersion::v41) read_elements_v41(lex, raw, tets);
-      else read_elements_v2(lex, raw, tets);
+      if (version == GmshVersion::v41) read_elements_v41(lex, raw, tets, triangles);
+      else read_elements_v2(lex, raw, tets, triangles);
       expect_end(lex, name);
     } else if (name == "PhysicalNames") {
       if (names_seen) lex.fail("a second $PhysicalNames section");
       names_seen = true;
       read_physical_names(lex, raw);
+      expect_end(lex, name);
+    } else if (name == "Entities" && version == GmshVersion::v41) {
+      if (entities_seen) lex.fail("a second $Entities section");
+      entities_seen = true;
+      read_entities_v41(lex, entity_physicals);
       expect_end(lex, name);
     } else {
       skip_section(lex, name);
@@ -670,7 +797,33 @@ TetMesh read_gmsh(const fs::path& file, int64_t max_nodes) {
   if (!nodes_seen) throw std::runtime_error(file.string() + ": no $Nodes section");
   if (!elements_seen) throw std::runtime_error(file.string() + ": no $Elements section");
 
+  // 4.1: an element's physical groups are its entity's (the first one for a tetrahedron's region).
+  auto entity_tags = [&](int dimension, int64_t entity) -> const std::vector<int64_t>* {
+    const auto it = entity_physicals.find({dimension, entity});
+    return it == entity_physicals.end() ? nullptr : &it->second;
+  };
   raw.tets.reserve(tets.size());
+  for (const GmshTriangle& t : triangles) {
+    std::vector<int64_t> groups;
+    if (version == GmshVersion::v41) {
+      if (const auto* p = entity_tags(2, t.entity)) groups = *p;
+    } else if (t.physical != 0) {
+      groups.push_back(t.physical);
+    }
+    if (groups.empty()) continue;
+    std::array<int64_t, 3> nodes;
+    for (int a = 0; a < 3; ++a) {
+      const auto it = tags.index.find(t.nodes[a]);
+      if (it == tags.index.end())
+        lex.fail_at(t.line, "triangle " + std::to_string(t.tag) + ": node tag " + std::to_string(t.nodes[a]) +
+                                " is not in $Nodes");
+      nodes[a] = it->second;
+    }
+    for (int64_t g : groups) {
+      raw.triangles.push_back(nodes);
+      raw.triangle_group.push_back(g);
+    }
+  }
   for (const GmshTet& t : tets) {
     std::array<int64_t, 4> nodes;
     for (int a = 0; a < 4; ++a) {
@@ -683,6 +836,12 @@ TetMesh read_gmsh(const fs::path& file, int64_t max_nodes) {
     raw.tets.push_back(nodes);
     raw.tet_line.push_back(t.line);
     raw.tet_tag.push_back(t.tag);
+    int64_t region = t.physical;
+    if (version == GmshVersion::v41) {
+      const auto* p = entity_tags(3, t.entity);
+      region = p && !p->empty() ? p->front() : 0;
+    }
+    raw.tet_region.push_back(region);
   }
   const std::string none =
       "no 4-node tetrahedra (element type 4) in $Elements, " + std::to_string(raw.ignored_elements) +
@@ -755,7 +914,12 @@ TetMesh read_tetgen(const fs::path& node_file, int64_t max_nodes) {
       if (a < 4) nodes[a] = v - base;  // a 10-node tetrahedron's corners come first
       else raw.mid_edge[v - base] = 1;
     }
-    for (int64_t a = 0; a < attributes; ++a) lex.real("region attribute");
+    int64_t region = 0;
+    for (int64_t a = 0; a < attributes; ++a) {
+      const double value = lex.real("region attribute");
+      if (a == 0) region = std::llround(value);
+    }
+    raw.tet_region.push_back(region);
     raw.tets.push_back(nodes);
     raw.tet_line.push_back(lex.line());
     raw.tet_tag.push_back(tag);
@@ -777,6 +941,14 @@ int64_t physical_group_tag(const TetMesh& mesh, const fs::path& file, int dimens
   throw std::runtime_error(file.string() + ": no physical group of dimension " + std::to_string(dimension) + " is named " +
                            quoted(name) + " (" + (known.empty() ? "the file names none of that dimension" : "the file names " + known) +
                            ")");
+}
+
+const std::vector<int>& surface_group_nodes(const TetMesh& mesh, const fs::path& file, std::string_view name) {
+  const int64_t tag = physical_group_tag(mesh, file, 2, name);
+  for (const SurfaceGroup& g : mesh.surface_groups)
+    if (g.tag == tag) return g.nodes;
+  static const std::vector<int> none;
+  return none;
 }
 
 bool known_mesh_extension(const fs::path& file) {

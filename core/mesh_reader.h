@@ -5,14 +5,20 @@
 //
 // Formats (the format follows the extension):
 //   .msh   gmsh ASCII, version 4.1 (entity blocks, node tags) or 2.2. Only 4-node
-//          tetrahedra (element type 4) are kept; points, lines, triangles and every
-//          other element type are ignored. $PhysicalNames is read (TetMesh::
-//          physical_names); $Entities and any other section are skipped. Binary files
-//          and version 4.0 are refused.
+//          tetrahedra (element type 4) become the body; 3-node triangles (type 2) of a
+//          physical surface group give that group's node set (TetMesh::surface_groups);
+//          points, lines and every other element type are ignored. $PhysicalNames is
+//          read (TetMesh::physical_names); in 4.1 $Entities gives each entity's physical
+//          tags (an element's physical groups are its entity's), in 2.2 an element's
+//          first tag is its physical group. Any other section is skipped. Binary files
+//          and version 4.0 are refused. A tetrahedron's region (tetrahedron_region) is
+//          its first physical volume tag, 0 when it has none.
 //   .node  TetGen: the .node file and its sibling .ele (same stem). Indices are
-//          0- or 1-based as the first point of the .node file says; attributes and
-//          boundary markers are read and ignored; '#' starts a comment; 10-node
-//          .ele files keep their four corners.
+//          0- or 1-based as the first point of the .node file says; node attributes
+//          and boundary markers are read and ignored; '#' starts a comment; 10-node
+//          .ele files keep their four corners. The first region attribute of an .ele
+//          line (when the header declares attributes) is the tetrahedron's region
+//          (rounded to an integer); none: 0.
 //
 // Nodal volumes (the tetrahedra's lumped volumes): v_i = sum over the tetrahedra t
 // incident to node i of |V_t| / 4, V_t = det[x_b - x_a, x_c - x_a, x_d - x_a] / 6,
@@ -49,6 +55,10 @@
 //   names       $PhysicalNames: each entry "dimension tag \"name\"", dimension 0..3,
 //               tag >= 1, a non-empty name on one line; a (dimension, tag) or a
 //               (dimension, name) given twice is refused.
+// Boundary faces: the triangles that belong to exactly one tetrahedron, each ordered
+// so that (x_b - x_a) x (x_c - x_a) points out of the body (away from the fourth node of
+// its tetrahedron): counterclockwise seen from outside.
+//
 // Every refusal is a std::runtime_error "<file>:<line>: <reason>" (no line when the
 // whole file is concerned): malformed or non-finite numbers, missing sections or
 // counts that do not match, indices out of range, duplicate tags, the checks above,
@@ -76,6 +86,13 @@ struct PhysicalName {
   int line = 0;  // the file line of the entry
 };
 
+// The nodes of the triangles of one gmsh physical surface group.
+struct SurfaceGroup {
+  int64_t tag = 0;         // the physical tag
+  std::string name;        // its $PhysicalNames name ("" when unnamed)
+  std::vector<int> nodes;  // indices into TetMesh::positions, ascending, unique
+};
+
 struct TetMesh {
   Points positions;                            // 3 x n nodes used by a tetrahedron, in file order, m
   std::vector<std::array<int, 4>> tetrahedra;  // m x 4 indices into positions, V_t > 0
@@ -85,7 +102,15 @@ struct TetMesh {
   int64_t ignored_elements = 0;                // gmsh: elements that are not 4-node tetrahedra
   bool reoriented = false;                     // the file's tetrahedra were negative (now swapped)
   std::vector<PhysicalName> physical_names;    // gmsh $PhysicalNames in file order (TetGen: none)
+  std::vector<int64_t> tetrahedron_region;     // m, the physical volume tag (TetGen: region attribute), 0 = none
+  std::vector<SurfaceGroup> surface_groups;    // gmsh physical surface groups with triangles, by ascending tag
+  std::vector<std::array<int, 3>> boundary_faces;  // triangles of one tetrahedron only, outward (see above)
 };
+
+// The node set of the physical surface group named `name`: unknown names are refused
+// by physical_group_tag's message; a named group without triangles has no nodes.
+const std::vector<int>& surface_group_nodes(const TetMesh& mesh, const std::filesystem::path& file,
+                                            std::string_view name);
 
 // The tag of the physical group of `dimension` named `name` in `mesh` (read from
 // `file`, for the message); an unknown name is a std::runtime_error

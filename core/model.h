@@ -66,6 +66,12 @@ struct Model {
   std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
   Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)
 
+  // The undeformed boundary surface (core/surface.h): 3 x T particle indices, each triangle
+  // counterclockwise seen from outside. Mesh clouds: the mesh's boundary faces; lattices
+  // (grid, jittered, graded, the hex FEM's): the box faces, two triangles per face cell;
+  // node_file clouds: none (0 columns).
+  Eigen::Matrix<int, 3, Eigen::Dynamic> surface_triangles;
+
   // Hexahedral FEM (solid == hex_fem only; particles are the lattice nodes).
   HexMesh hex;
 
@@ -85,14 +91,15 @@ struct Model {
   // bounding box grown by two radii on every side), m. A centre that the free motion
   // takes outside is put back on the box, and its outward velocity removed.
   Vec3 tool_workspace_min{0, 0, 0}, tool_workspace_max{0, 0, 0};
-  double touch_height = 0.0;      // z of the centre when the sphere touches the undeformed surface
-                                  // (the highest particle under it) with its lowest point, m
+  double touch_height = 0.0;      // z of the centre when the sphere, coming down over indenter_start's x, y,
+                                  // first touches the undeformed surface: surface_triangles when there are
+                                  // any (docs/physics.md (2.16)), else the highest particle under it + R, m
 
   // Diagnostics of the build.
   int regularized_count = 0;      // particles whose moment matrix needed regularisation
   double worst_condition = 0.0;   // largest cond(A_i) before regularisation
   double total_volume = 0.0;      // sum v_i, m^3 (compare with box_volume)
-  double box_volume = 0.0;        // m^3
+  double box_volume = 0.0;        // m^3: the scene's box; a mesh body without /body/box: the mesh's volume
   double min_spacing = 0.0;       // smallest nearest-neighbour distance (FEM: element edge), m
   double max_spacing = 0.0;       // largest nearest-neighbour distance (FEM: element edge), m
   double wave_speed = 0.0;        // p-wave speed sqrt((lambda + 2 mu) / rho), m/s

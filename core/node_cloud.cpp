@@ -56,6 +56,20 @@ NodeCloud tensor_lattice(const std::vector<double> (&coord)[3]) {
   return cloud;
 }
 
+// What the model keeps of a mesh.
+NodeCloud mesh_cloud(const TetMesh& mesh) {
+  NodeCloud cloud;
+  cloud.positions = mesh.positions;
+  cloud.mesh_volume = mesh.nodal_volume;
+  cloud.mesh_tetrahedra = static_cast<int64_t>(mesh.tetrahedra.size());
+  cloud.mesh_unused_nodes = mesh.unused_nodes;
+  cloud.tetrahedra = mesh.tetrahedra;
+  cloud.tetrahedron_region = mesh.tetrahedron_region;
+  for (const SurfaceGroup& g : mesh.surface_groups) cloud.surface_node_sets.push_back({g.name, g.tag, g.nodes});
+  cloud.boundary_triangles = mesh.boundary_faces;
+  return cloud;
+}
+
 }  // namespace
 
 Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing) {
@@ -192,6 +206,7 @@ NodeCloud mesh_node_cloud(const Scene& scene) {
     return s.str();
   };
   const std::string name = scene.distribution.mesh_file.string();
+  if (!scene.box_given) return mesh_cloud(mesh);  // a body of any shape
   if ((lo - box.min).cwiseAbs().maxCoeff() > tolerance || (hi - box.max).cwiseAbs().maxCoeff() > tolerance)
     throw SceneError(scene.source, field,
                      "the mesh " + name + " spans " + text(lo) + " ... " + text(hi) + ", not /body/box " +
@@ -204,12 +219,7 @@ NodeCloud mesh_node_cloud(const Scene& scene) {
       << " m^3 (a hole, an overlap or another shape): the mesh must fill /body/box";
     throw SceneError(scene.source, field, s.str());
   }
-  NodeCloud cloud;
-  cloud.positions = mesh.positions;
-  cloud.mesh_volume = mesh.nodal_volume;
-  cloud.mesh_tetrahedra = static_cast<int64_t>(mesh.tetrahedra.size());
-  cloud.mesh_unused_nodes = mesh.unused_nodes;
-  return cloud;
+  return mesh_cloud(mesh);
 }
 
 NodeCloud make_node_cloud(const Scene& scene) {

@@ -1,8 +1,10 @@
 #pragma once
 // Node distributions: where the particles of the meshless solid sit in the
 // reference configuration.
+#include <array>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "core/scene.h"
@@ -18,6 +20,15 @@ struct NodeCloud {
   std::vector<double> mesh_volume;    // n, m^3
   int64_t mesh_tetrahedra = 0;        // tetrahedra of the mesh
   int64_t mesh_unused_nodes = 0;      // TetGen mid-edge nodes dropped (other unused nodes are refused: mesh_reader.h)
+  std::vector<std::array<int, 4>> tetrahedra;        // mesh_tetrahedra x 4 particle indices, positive volume
+  std::vector<int64_t> tetrahedron_region;           // their physical volume tag (TetGen: region), 0 = none
+  struct NodeSet {
+    std::string name;        // the gmsh physical surface name ("" when unnamed)
+    int64_t tag = 0;         // its physical tag
+    std::vector<int> nodes;  // particle indices, ascending
+  };
+  std::vector<NodeSet> surface_node_sets;            // the mesh's physical surface groups
+  std::vector<std::array<int, 3>> boundary_triangles;  // the mesh's boundary faces, outward (mesh_reader.h)
 };
 
 // Regular lattice with `per_axis` nodes along each box axis, corners included.
@@ -46,9 +57,11 @@ Vec3 graded_focus(const Scene& scene);
 NodeCloud load_node_list(const std::filesystem::path& file);
 
 // The vertices of the tetrahedral mesh distribution.mesh_file (core/mesh_reader.h) with
-// their nodal volumes. The mesh must fill the scene's box: its bounding box and the
-// tetrahedra's total volume must equal the box's to 1e-6 (relative), else a SceneError
-// at /body/distribution/file; reader errors are std::runtime_error naming file and line.
+// their nodal volumes, tetrahedra, regions, physical surface node sets and boundary faces.
+// With /body/box given (Scene::box_given) the mesh must fill it: its bounding box and the
+// tetrahedra's total volume must equal the box's to 1e-6 (relative), else a SceneError at
+// /body/distribution/file; without it the mesh may have any shape (a dome, a sphere).
+// Reader errors are std::runtime_error naming file and line.
 NodeCloud mesh_node_cloud(const Scene& scene);
 
 // The cloud a scene names (grid, jittered_grid, graded_grid, node_file or mesh).

@@ -505,6 +505,7 @@ void read_body(const Reader& r, const fs::path& base_dir, Scene& s) {
   r.object(kBodyKeys);
   read_box(r["box"], s.box);
   read_distribution(r["distribution"], s.box, base_dir, s.distribution);
+  s.box_given = r["box"].present() || s.distribution.type != DistributionType::mesh;
 }
 
 void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {

@@ -180,6 +180,10 @@ struct Scene {
   std::string source;        // where the scene came from (file path), for messages
   std::string model = "mls";  // "mls" (the meshless solid) or "hex_fem" (the FEM reference)
   BoxSpec box;
+  // false for a mesh body without /body/box: the mesh may have any shape, its bounding box
+  // serves where a box is needed (Model::box_volume is then the mesh's volume). Lattices and
+  // node lists always have a box (the default one when absent).
+  bool box_given = true;
   DistributionSpec distribution;
   MlsSpec mls;
   HexFemSpec hex_fem;

@@ -8,7 +8,8 @@
 // physical names are well formed, unique and found by physical_group_tag; or a
 // std::runtime_error. The seeds (corpus/mesh_reader_fuzz/) include a mesh for each
 // refusal of the checks: inverted, degenerate, unused node, two parts, a pinch,
-// an overlap, duplicate physical names.
+// an overlap, duplicate physical names; and physical surface groups (4.1 through
+// $Entities, 2.2 through element tags) and TetGen region attributes.
 #include <unistd.h>
 
 #include <Eigen/Geometry>
@@ -72,6 +73,25 @@ void check(const palpate::TetMesh& m, int64_t declared) {
     for (int v : t) used[v] = 1;
   for (char u : used)
     if (!u) std::abort();
+  // A region per tetrahedron; boundary faces index the nodes and are outward (away from
+  // the rest of the body: a closed surface encloses the mesh's volume, divergence theorem).
+  if (m.tetrahedron_region.size() != m.tetrahedra.size() || m.boundary_faces.size() < 4) std::abort();
+  double enclosed = 0;
+  const palpate::Vec3 origin = m.positions.col(0);
+  const double L = (m.positions.rowwise().maxCoeff() - m.positions.rowwise().minCoeff()).norm();
+  for (const auto& f : m.boundary_faces) {
+    for (int v : f)
+      if (v < 0 || v >= n) std::abort();
+    const palpate::Vec3 a = m.positions.col(f[0]) - origin, b = m.positions.col(f[1]) - origin,
+                        c = m.positions.col(f[2]) - origin;
+    enclosed += (a + b + c).dot((b - a).cross(c - a)) / 18.0;
+  }
+  const double round_off = 1e-12 * static_cast<double>(m.boundary_faces.size()) * L * L * L;
+  if (!(std::abs(enclosed - m.total_volume) <= 1e-6 * m.total_volume + round_off)) std::abort();
+  // Surface groups: ascending unique node indices.
+  for (const palpate::SurfaceGroup& g : m.surface_groups)
+    for (size_t k = 0; k < g.nodes.size(); ++k)
+      if (g.nodes[k] < 0 || g.nodes[k] >= n || (k > 0 && g.nodes[k] <= g.nodes[k - 1])) std::abort();
 }
 
 // The names: dimension 0..3, tag >= 1, non-empty, each (dimension, name) found.

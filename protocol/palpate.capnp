@@ -242,6 +242,8 @@ struct SessionInfo {
   guide @16 :ToolGuide;        # vertical: the tool moves along z only
   device @17 :DeviceLimits;    # as given at open (0 = no limit)
   coupling @18 :Coupling;      # the coupling in effect for setPosition (after clamping)
+  surfaceTriangles @19 :List(UInt32);  # 3 per triangle, particle indices, counterclockwise seen from
+                                       # outside: the undeformed boundary surface (empty: none known)
 }
 
 # ---------------------------------------------------------------------------

@@ -209,6 +209,9 @@ class SessionImpl final : public wire::Session::Server {
     auto rest = info.initRestPositions(3 * static_cast<unsigned>(m.particle_count));
     const double* x = m.rest_position.data();
     for (unsigned k = 0; k < rest.size(); ++k) rest.set(k, static_cast<float>(x[k]));
+    auto triangles = info.initSurfaceTriangles(3 * static_cast<unsigned>(m.surface_triangles.cols()));
+    const int* t = m.surface_triangles.data();
+    for (unsigned k = 0; k < triangles.size(); ++k) triangles.set(k, static_cast<uint32_t>(t[k]));
     info.setTouchHeight(m.touch_height);
     info.setRadius(m.indenter_radius);
     info.setYoungModulus(s.material.young_modulus);

@@ -305,7 +305,7 @@ TEST_F(MeshFiles, MissingSections) {
             (dir_ / "m.msh").string() + ":1: the file must start with $MeshFormat (is it a gmsh .msh file?), got 'hello'");
   const std::string unclosed = replace(kGmsh41, "$EndEntities\n", "");
   EXPECT_EQ(error_of("m.msh", unclosed),
-            at("m.msh", unclosed, "$Entities") + "section $Entities is not closed by $EndEntities");
+            at("m.msh", unclosed, "$Nodes") + "expected $EndEntities, got '$Nodes'");  // $Entities is read (4.1)
   const std::string names = replace(kGmsh41, "$EndPhysicalNames\n", "");
   EXPECT_EQ(error_of("m.msh", names), at("m.msh", names, "$Entities") + "expected $EndPhysicalNames, got '$Entities'");
   const std::string truncated = kGmsh41.substr(0, kGmsh41.find("9 1 7 5 8"));
@@ -734,9 +734,11 @@ TEST(MeshScene, ModelOfTheSmallMeshReportsItsCloud) {
 }
 
 TEST(MeshScene, TheMeshMustFillTheBox) {
-  // The unit-cube mesh against the default 2 m cube.
+  // The unit-cube mesh against the 2 m cube (given: without a box any shape is accepted).
   try {
-    build_model(parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh"})", ""), "inline", kData));
+    build_model(parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh"})",
+                                       R"("box": {"min": [-1, -1, -2], "max": [1, 1, 0]}, )"),
+                            "inline", kData));
     ADD_FAILURE() << "accepted";
   } catch (const SceneError& e) {
     EXPECT_EQ(e.field(), "/body/distribution/file");
@@ -773,6 +775,17 @@ TEST(MeshScene, TheMeshMustFillTheBox) {
   EXPECT_NEAR(m.total_volume, 1.0, 1e-15);
 }
 
+TEST(MeshScene, WithoutABoxTheMeshKeepsItsShape) {
+  const Scene scene = parse_scene(mesh_scene("cube_tet_small.msh", R"(, "mls": {"volumes": "mesh"})", ""), "inline", kData);
+  EXPECT_FALSE(scene.box_given);
+  const Model m = build_model(scene);
+  const TetMesh mesh = read_mesh(kData / "cube_tet_small.msh");
+  EXPECT_NEAR(m.box_volume, mesh.total_volume, 1e-15);  // the mesh's own volume
+  EXPECT_TRUE(parse_scene(mesh_scene("cube_tet_small.msh"), "inline", kData).box_given);
+  // Lattices keep the (default) box.
+  EXPECT_TRUE(parse_scene(R"({"body": {"distribution": {"type": "grid"}}})", "inline", kData).box_given);
+}
+
 TEST(MeshScene, ReaderErrorsNameTheFileAndLine) {
   const fs::path dir = fs::temp_directory_path() / ("palpate-mesh-bad-" + std::to_string(getpid()));
   fs::create_directories(dir);
@@ -784,6 +797,209 @@ TEST(MeshScene, ReaderErrorsNameTheFileAndLine) {
     EXPECT_EQ(std::string(e.what()), (dir / "bad.msh").string() + ":5: numNodes: expected an integer, got 'x'");
   }
   fs::remove_all(dir);
+}
+
+
+// ---------------------------------------------------------------------------
+// Physical groups, regions and the boundary faces.
+
+// The unit cube of kGmsh41 with its bottom face (z = 0: nodes 1 2 3 4) in the physical
+// surface 7 "bottom" (through $Entities) and the volume in physical volume 5 "tissue".
+const std::string kGmsh41Groups = R"($MeshFormat
+4.1 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+2 7 "bottom"
+3 5 "tissue"
+$EndPhysicalNames
+$Entities
+0 0 1 1
+1 0 0 0 1 1 0 1 7 0
+1 0 0 0 1 1 1 1 5 1 1
+$EndEntities
+$Nodes
+1 8 1 8
+3 1 0 8
+1
+2
+3
+4
+5
+6
+7
+8
+0 0 0
+1 0 0
+0 1 0
+1 1 0
+0 0 1
+1 0 1
+0 1 1
+1 1 1
+$EndNodes
+$Elements
+2 8 1 8
+2 1 2 2
+1 1 2 4
+2 1 4 3
+3 1 4 6
+3 1 2 4 8
+4 1 6 2 8
+5 1 4 3 8
+6 1 3 7 8
+7 1 5 6 8
+8 1 7 5 8
+$EndElements
+)";
+
+// The same in 2.2: an element's first tag is its physical group.
+const std::string kGmsh22Groups = R"($MeshFormat
+2.2 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+2 7 "bottom"
+3 5 "tissue"
+$EndPhysicalNames
+$Nodes
+8
+1 0 0 0
+2 1 0 0
+3 0 1 0
+4 1 1 0
+5 0 0 1
+6 1 0 1
+7 0 1 1
+8 1 1 1
+$EndNodes
+$Elements
+8
+1 2 2 7 1 1 2 4
+2 2 2 7 1 1 4 3
+3 4 2 5 1 1 2 4 8
+4 4 2 5 1 1 6 2 8
+5 4 2 5 1 1 4 3 8
+6 4 2 5 1 1 3 7 8
+7 4 2 5 1 1 5 6 8
+8 4 2 5 1 1 7 5 8
+$EndElements
+)";
+
+TEST_F(MeshFiles, PhysicalSurfaceGroupsAndRegionsIn41And22) {
+  for (const auto& [name, text] : {std::pair{"g41.msh", kGmsh41Groups}, std::pair{"g22.msh", kGmsh22Groups}}) {
+    SCOPED_TRACE(name);
+    const fs::path file = write(name, text);
+    const TetMesh m = read_gmsh(file);
+    EXPECT_EQ(m.ignored_elements, 2);  // the triangles are no particles' elements
+    ASSERT_EQ(m.surface_groups.size(), 1u);
+    EXPECT_EQ(m.surface_groups[0].tag, 7);
+    EXPECT_EQ(m.surface_groups[0].name, "bottom");
+    EXPECT_EQ(surface_group_nodes(m, file, "bottom"), (std::vector<int>{0, 1, 2, 3}));
+    for (int i : m.surface_groups[0].nodes) EXPECT_EQ(m.positions(2, i), 0.0);
+    EXPECT_EQ(m.tetrahedron_region, std::vector<int64_t>(6, 5));
+    EXPECT_EQ(physical_group_tag(m, file, 3, "tissue"), 5);
+    try {
+      surface_group_nodes(m, file, "top");
+      ADD_FAILURE() << "an unknown group was accepted";
+    } catch (const std::runtime_error& e) {
+      EXPECT_EQ(std::string(e.what()),
+                file.string() + ": no physical group of dimension 2 is named 'top' (the file names 'bottom')");
+    }
+  }
+  // Without physical tags on the elements: region 0, no groups (kGmsh22's triangles have tag 0).
+  const TetMesh plain = read_gmsh(write("plain.msh", kGmsh22));
+  EXPECT_TRUE(plain.surface_groups.empty());
+  EXPECT_EQ(plain.tetrahedron_region, std::vector<int64_t>(6, 1));
+  const TetMesh no_entity = read_gmsh(write("plain41.msh", kGmsh41));
+  EXPECT_TRUE(no_entity.surface_groups.empty());  // its triangles' entity (2, 1) has no physical tag
+  EXPECT_EQ(no_entity.tetrahedron_region, std::vector<int64_t>(6, 1));
+}
+
+TEST_F(MeshFiles, TetGenRegionAttribute) {
+  write("plain.ele", tetgen_ele(1));
+  EXPECT_EQ(read_tetgen(write("plain.node", tetgen_node(1))).tetrahedron_region, std::vector<int64_t>(6, 0));
+  // One region attribute: tetrahedra 1-3 in region 4, 4-6 in region -2.
+  std::string ele = tetgen_ele(1);
+  std::istringstream in(ele);
+  std::ostringstream out;
+  std::string line;
+  std::getline(in, line);
+  out << "6 4 1\n";
+  for (int t = 0; std::getline(in, line); ++t) out << line << (t < 3 ? " 4" : " -2.0") << '\n';
+  write("regions.ele", out.str());
+  EXPECT_EQ(read_tetgen(write("regions.node", tetgen_node(1))).tetrahedron_region,
+            (std::vector<int64_t>{4, 4, 4, -2, -2, -2}));
+}
+
+// The boundary of a closed polyhedral surface: the area and, by the divergence theorem
+// (the field x / 3 has divergence 1), sum_t (1/3) (x_t . n_t) A_t = the enclosed volume, with
+// x_t any point of the triangle (its centroid) and n_t the unit outward normal: an inward
+// triangle would subtract its share, so the identity checks the orientation.
+struct SurfaceSums {
+  double area = 0, volume = 0;
+};
+SurfaceSums surface_sums(const Points& X, const std::vector<std::array<int, 3>>& faces) {
+  SurfaceSums s;
+  for (const auto& f : faces) {
+    const Vec3 a = X.col(f[0]), b = X.col(f[1]), c = X.col(f[2]);
+    const Vec3 n2 = (b - a).cross(c - a);  // 2 A n
+    s.area += 0.5 * n2.norm();
+    s.volume += ((a + b + c) / 3.0).dot(n2) / 6.0;
+  }
+  return s;
+}
+
+TEST_F(MeshFiles, BoundaryFacesOfTheTetCube) {
+  const TetMesh m = read_gmsh(write("cube.msh", kGmsh41));
+  EXPECT_EQ(m.boundary_faces.size(), 12u);  // two triangles per cube face
+  const SurfaceSums s = surface_sums(m.positions, m.boundary_faces);
+  EXPECT_NEAR(s.area, 6.0, 1e-14);
+  EXPECT_NEAR(s.volume, 1.0, 1e-14);
+  for (const auto& f : m.boundary_faces)
+    for (int v : f) EXPECT_TRUE(v >= 0 && v < m.positions.cols());
+  // The committed gmsh cube (finer, shifted): the same identities, area 6 x its faces.
+  const TetMesh fine = read_mesh(kData / "cube_tet_small.msh");
+  const Vec3 edge = fine.positions.rowwise().maxCoeff() - fine.positions.rowwise().minCoeff();
+  const SurfaceSums t = surface_sums(fine.positions, fine.boundary_faces);
+  EXPECT_NEAR(t.area, 2 * (edge[0] * edge[1] + edge[1] * edge[2] + edge[2] * edge[0]), 1e-12);
+  EXPECT_NEAR(t.volume, fine.total_volume, 1e-12 * fine.total_volume);
+  // A mirrored TetGen file (stored reoriented) bounds the same volume outward.
+  write("m.ele", tetgen_ele(1, false, true));
+  const TetMesh mirrored = read_tetgen(write("m.node", tetgen_node(1)));
+  EXPECT_NEAR(surface_sums(mirrored.positions, mirrored.boundary_faces).volume, 1.0, 1e-14);
+}
+
+// tests/data/dome.msh (tests/data/dome.geo): a hemisphere of radius 0.05 m on z = 0.
+TEST(MeshData, TheDomeHasItsGroupsAndAClosedOutwardBoundary) {
+  const fs::path file = kData / "dome.msh";
+  const TetMesh m = read_mesh(file);
+  EXPECT_GE(m.positions.cols(), 200);
+  EXPECT_LE(m.positions.cols(), 2000);
+  const std::vector<int>& base = surface_group_nodes(m, file, "base");
+  const std::vector<int>& skin = surface_group_nodes(m, file, "skin");
+  ASSERT_FALSE(base.empty());
+  ASSERT_FALSE(skin.empty());
+  for (int i : base) EXPECT_NEAR(m.positions(2, i), 0.0, 1e-12);
+  for (int i : skin) EXPECT_NEAR(m.positions.col(i).norm(), 0.05, 1e-9);
+  const int64_t tissue = physical_group_tag(m, file, 3, "tissue");
+  for (int64_t r : m.tetrahedron_region) EXPECT_EQ(r, tissue);
+  // Outward and closed: the divergence theorem gives the tetrahedra's volume, which lies
+  // below the hemisphere's (2/3) pi R^3 by the chords' error (within a few per cent here).
+  const SurfaceSums s = surface_sums(m.positions, m.boundary_faces);
+  EXPECT_NEAR(s.volume, m.total_volume, 1e-12);
+  const double hemisphere = 2.0 / 3.0 * M_PI * std::pow(0.05, 3);
+  EXPECT_LT(m.total_volume, hemisphere);
+  EXPECT_GT(m.total_volume, 0.95 * hemisphere);
+  EXPECT_LT(s.area, 3 * M_PI * 0.05 * 0.05);  // the base pi R^2 plus the cap 2 pi R^2, from inside
+  EXPECT_GT(s.area, 0.95 * 3 * M_PI * 0.05 * 0.05);
+  // Every boundary node belongs to a group, and the groups' nodes are boundary nodes.
+  std::vector<char> on_boundary(m.positions.cols(), 0), grouped(m.positions.cols(), 0);
+  for (const auto& f : m.boundary_faces)
+    for (int v : f) on_boundary[v] = 1;
+  for (int i : base) grouped[i] = 1;
+  for (int i : skin) grouped[i] = 1;
+  EXPECT_EQ(on_boundary, grouped);
 }
 
 }  // namespace

@@ -111,6 +111,7 @@ const Field kFields[] = {
     SCENE_FIELD("/model", model, R"("hex_fem")"),
     SCENE_FIELD("/body/box/min", box.min, "[-1, -1, -3]"),
     SCENE_FIELD("/body/box/max", box.max, "[1, 2, 0]"),
+    SCENE_FIELD("", box_given, ""),
     SCENE_FIELD("/body/distribution/type", distribution.type, R"("jittered_grid")"),
     SCENE_FIELD("/body/distribution/per_edge", distribution.per_edge, "12"),
     SCENE_FIELD("/body/distribution/spacing", distribution.spacing, "0.25"),
@@ -172,7 +173,7 @@ const Field kFields[] = {
 // Add it to kFields above, read it in core/scene.cpp, carry it in protocol/palpate.capnp
 // and document it in docs/scene-format.md; the tests below check that all four agree.
 [[maybe_unused]] void every_member_is_in_kFields(const Scene& s) {
-  [[maybe_unused]] const auto& [name, source, model, box, distribution, mls, hex_fem, material, fixed_faces, indenter,
+  [[maybe_unused]] const auto& [name, source, model, box, box_given, distribution, mls, hex_fem, material, fixed_faces, indenter,
                                 contact, integrator, gravity, verify, health] = s;
   [[maybe_unused]] const auto& [min, max] = s.box;
   [[maybe_unused]] const auto& [type, per_edge, spacing, jitter, first_spacing, focus_given, focus, seed, node_file,

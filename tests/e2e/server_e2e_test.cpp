@@ -1,6 +1,7 @@
 // End-to-end tests of palpate-server: the real server process on a loopback port
 // (picked by the system: --listen 127.0.0.1:0, the port read from its first
 // stdout line), driven by real Cap'n Proto clients.
+#include <map>
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -352,6 +353,31 @@ TEST(ServerE2E, VersionAndSessionStreams) {
   const size_t count = sink.frames.size();
   c.pump(200);
   EXPECT_EQ(sink.frames.size(), count);
+}
+
+// SessionInfo.surfaceTriangles of hertz_cube at 8^3: the box faces, two triangles per face
+// cell (6 faces x 7 x 7 cells x 2), valid indices, each edge in two triangles (closed).
+TEST(ServerE2E, SessionInfoCarriesTheSurfaceTriangles) {
+  Client c;
+  auto req = c.server.openSessionRequest();
+  auto r = req.initRequest();
+  r.getScene().setName("hertz_cube");
+  r.initOverrides(1).set(0, "body.distribution.per_edge=8");
+  r.setHeadless(true);
+  auto response = req.send().wait(c.ws());
+  auto info = response.getInfo();
+  auto triangles = info.getSurfaceTriangles();
+  ASSERT_EQ(triangles.size(), 3u * 6 * 7 * 7 * 2);
+  std::map<std::pair<uint32_t, uint32_t>, int> directed;
+  for (unsigned k = 0; k < triangles.size(); ++k) {
+    ASSERT_LT(triangles[k], info.getParticleCount());
+    const unsigned next = k % 3 == 2 ? k - 2 : k + 1;
+    ++directed[{triangles[k], triangles[next]}];
+  }
+  for (const auto& [edge, count] : directed) {
+    EXPECT_EQ(count, 1);
+    EXPECT_EQ(directed.count({edge.second, edge.first}), 1u);
+  }
 }
 
 TEST(ServerE2E, ForceCommandReachesTheStreamWithinTwoTicks) {
