@@ -284,11 +284,12 @@ void build_hex_fem(Model& m, const HexFemSpec& spec, const NodeCloud& cloud) {
 }
 
 // Fixed particles and the indenter's placement (both models).
-void set_boundary_and_indenter(Model& m, const Scene& scene) {
+void set_boundary_and_indenter(Model& m, const Scene& scene, const NodeCloud& cloud) {
   const int n = m.particle_count;
   const Points& X = m.rest_position;
-  // Boundary conditions.
+  // Boundary conditions: the box faces, then the regions (core/boundary.h).
   m.fixed = particles_on_faces(X, scene.fixed_faces);
+  for (const FixedRegion& region : scene.fixed_regions) fix_region(cloud, region, scene.source, m.fixed);
   m.inverse_mass.resize(n);
   for (int i = 0; i < n; ++i) {
     m.inverse_mass[i] = m.fixed[i] ? 0.0 : 1.0 / m.mass[i];
@@ -365,7 +366,7 @@ Model build_model(const Scene& scene) {
     build_hex_fem(m, scene.hex_fem, cloud);
   else
     throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
-  set_boundary_and_indenter(m, scene);
+  set_boundary_and_indenter(m, scene, cloud);
   spdlog::debug("model {}: {} particles, {} fixed, {} regularised (worst cond {:.3g}), volume {:.4g} of box {:.4g}",
                 scene.model, m.particle_count, m.fixed_count, m.regularized_count, m.worst_condition,
                 m.total_volume, m.box_volume);

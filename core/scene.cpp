@@ -118,6 +118,11 @@ constexpr std::string_view kMlsKeys[] = {"neighbors",   "max_neighbors", "suppor
                                          "integration", "volumes",       "hourglass",      "regularization"};
 constexpr std::string_view kHexFemKeys[] = {"formulation", "volumetric_integration"};
 constexpr std::string_view kMaterialKeys[] = {"young_modulus", "poisson_ratio", "density", "volume_stiffness", "law"};
+// An object element of `fixed` (docs/scene-format.md, "fixed").
+constexpr std::string_view kFixedRegionKeys[] = {"group", "plane", "box", "sphere"};
+constexpr std::string_view kFixedPlaneKeys[] = {"point", "normal", "tolerance"};
+constexpr std::string_view kFixedBoxKeys[] = {"min", "max"};
+constexpr std::string_view kFixedSphereKeys[] = {"center", "radius"};
 constexpr std::string_view kIndenterKeys[] = {"radius", "mass", "position", "force", "workspace_min", "workspace_max",
                                               "guide"};
 constexpr std::string_view kContactKeys[] = {"tolerance", "max_iterations"};
@@ -277,6 +282,7 @@ class Reader {
       : value_(value), path_(std::move(path)), origin_(&origin) {}
 
   bool present() const { return value_ != nullptr; }
+  bool is_object() const { return value_ && value_->is_object(); }
   bool files_required() const { return origin_->files == SceneFiles::required; }
 
   [[noreturn]] void fail(const std::string& reason) const {
@@ -555,10 +561,64 @@ void read_material(const Reader& r, MaterialSpec& m) {
   r["law"].get(m.law, "material law", kMaterialLaws);
 }
 
-void read_fixed(const Reader& r, uint32_t& faces) {
+// One object element of `fixed`: exactly one of group / plane / box / sphere.
+FixedRegion read_fixed_region(const Reader& e, const std::string& field) {
+  e.object(kFixedRegionKeys);
+  int shapes = 0;
+  for (std::string_view k : kFixedRegionKeys) shapes += e[k].present();
+  if (shapes != 1)
+    e.fail("a fixed region needs exactly one of the keys " + join_names(kFixedRegionKeys) +
+           " (or a face name string)");
+  FixedRegion region;
+  region.field = field;
+  auto required = [](const Reader& r, const char* what) {
+    if (!r.present()) r.fail(std::string("required: ") + what);
+  };
+  if (const Reader g = e["group"]; g.present()) {
+    region.kind = FixedRegionKind::group;
+    g.get(region.group);
+    if (region.group.empty()) g.fail("the name of a physical surface group of the mesh, not empty");
+  } else if (const Reader p = e["plane"]; p.present()) {
+    region.kind = FixedRegionKind::plane;
+    p.object(kFixedPlaneKeys);
+    required(p["point"], "a point of the plane [x, y, z] in m");
+    required(p["normal"], "the plane's normal [nx, ny, nz]");
+    p["point"].get(region.point);
+    p["normal"].get(region.normal);
+    if (!(region.normal.norm() > 0)) p["normal"].fail("must not be the zero vector");
+    region.normal.normalize();
+    p["tolerance"].get(region.tolerance, closed(0.0, 1e3));
+  } else if (const Reader b = e["box"]; b.present()) {
+    region.kind = FixedRegionKind::box;
+    b.object(kFixedBoxKeys);
+    required(b["min"], "the box's lower corner [x, y, z] in m");
+    required(b["max"], "the box's upper corner [x, y, z] in m");
+    b["min"].get(region.min);
+    b["max"].get(region.max);
+    if (!(region.max.array() >= region.min.array()).all()) b["max"].fail("must be at least min in every component");
+  } else {
+    const Reader sp = e["sphere"];
+    region.kind = FixedRegionKind::sphere;
+    sp.object(kFixedSphereKeys);
+    required(sp["center"], "the sphere's centre [x, y, z] in m");
+    required(sp["radius"], "the sphere's radius in m");
+    sp["center"].get(region.center);
+    sp["radius"].get(region.radius, open_closed(0.0, 1e3));
+  }
+  return region;
+}
+
+void read_fixed(const Reader& r, uint32_t& faces, std::vector<FixedRegion>& regions) {
   if (!r.present()) return;  // absent: the default; [] is a free body
   uint32_t out = 0;
-  for (const Reader& e : r.elements("an array of face names")) out |= e.pick("face", kFaces)->value;
+  int index = 0;
+  for (const Reader& e : r.elements("an array of face names and fixed regions")) {
+    if (e.is_object())
+      regions.push_back(read_fixed_region(e, "/fixed/" + std::to_string(index)));
+    else
+      out |= e.pick("face", kFaces)->value;
+    ++index;
+  }
   faces = out;
 }
 
@@ -655,7 +715,7 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   read_material(r["material"], s.material);
   if (s.model == "hex_fem" && s.material.law != MaterialLaw::stvk)
     r["material"]["law"].fail("applies to the mls model; the hex_fem model's law is hex_fem.formulation");
-  read_fixed(r["fixed"], s.fixed_faces);
+  read_fixed(r["fixed"], s.fixed_faces, s.fixed_regions);
   read_indenter(r["indenter"], s.indenter);
   s.contact.tolerance = 0.0;  // left out: derived (derive_scale_defaults)
   read_contact(r["contact"], s.contact);

@@ -59,6 +59,21 @@ enum Face : uint32_t {
   faces_sides = face_x_min | face_x_max | face_y_min | face_y_max,
 };
 
+// A region of particles held fixed besides the box faces (a `fixed` element that is an
+// object, docs/scene-format.md): a mesh's physical surface group (its nodes), the
+// particles within `tolerance` of a plane, or inside a box or a sphere.
+enum class FixedRegionKind { group, plane, box, sphere };
+struct FixedRegion {
+  FixedRegionKind kind = FixedRegionKind::plane;
+  std::string group;                         // group: the gmsh physical surface's name
+  Vec3 point{0, 0, 0}, normal{0, 0, 1};      // plane: |n . (X - point)| <= tolerance, n a unit vector
+  double tolerance = 1e-9;                   // plane, m
+  Vec3 min{0, 0, 0}, max{0, 0, 0};           // box, m (closed)
+  Vec3 center{0, 0, 0};                      // sphere, m
+  double radius = 0.0;                       // sphere, m (closed)
+  std::string field;                         // its JSON pointer ("/fixed/2"), for messages
+};
+
 struct BoxSpec {
   Vec3 min{-1.0, -1.0, -2.0};  // m; the default cube of edge 2 m with its top face at z = 0
   Vec3 max{1.0, 1.0, 0.0};
@@ -189,6 +204,7 @@ struct Scene {
   HexFemSpec hex_fem;
   MaterialSpec material;
   uint32_t fixed_faces = face_bottom | faces_sides;
+  std::vector<FixedRegion> fixed_regions;  // the object elements of `fixed` (file scenes only: the wire has faces)
   IndenterSpec indenter;
   ContactSpec contact;
   IntegratorSpec integrator;

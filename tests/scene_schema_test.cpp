@@ -173,7 +173,8 @@ const Field kFields[] = {
 // Add it to kFields above, read it in core/scene.cpp, carry it in protocol/palpate.capnp
 // and document it in docs/scene-format.md; the tests below check that all four agree.
 [[maybe_unused]] void every_member_is_in_kFields(const Scene& s) {
-  [[maybe_unused]] const auto& [name, source, model, box, box_given, distribution, mls, hex_fem, material, fixed_faces, indenter,
+  [[maybe_unused]] const auto& [name, source, model, box, box_given, distribution, mls, hex_fem, material, fixed_faces,
+                                fixed_regions /* /fixed objects: file scenes only */, indenter,
                                 contact, integrator, gravity, verify, health] = s;
   [[maybe_unused]] const auto& [min, max] = s.box;
   [[maybe_unused]] const auto& [type, per_edge, spacing, jitter, first_spacing, focus_given, focus, seed, node_file,

@@ -318,7 +318,7 @@ TEST(SceneErrors, WrongType) {
 
   e = error_of(R"({"fixed": "bottom"})");
   EXPECT_EQ(e.field(), "/fixed");
-  EXPECT_TRUE(contains(e.reason(), "expected an array of face names, got string")) << e.reason();
+  EXPECT_TRUE(contains(e.reason(), "expected an array of face names and fixed regions, got string")) << e.reason();
 
   e = error_of(R"({"contact": {"max_iterations": true}})");
   EXPECT_EQ(e.field(), "/contact/max_iterations");
