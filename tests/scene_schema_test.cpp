@@ -194,7 +194,7 @@ const Field kFields[] = {
   [[maybe_unused]] const auto& [neighbors, max_neighbors, support_factor, support_rule, integration, volumes, hourglass,
                                 regularization] = s.mls;
   [[maybe_unused]] const auto& [formulation, volumetric_integration] = s.hex_fem;
-  [[maybe_unused]] const auto& [young_modulus, poisson_ratio, density, volume_stiffness, law] = s.material;
+  [[maybe_unused]] const auto& [young_modulus, poisson_ratio, density, volume_stiffness, law, inclusions] = s.material;
   [[maybe_unused]] const auto& [radius, mass, position_given, position, force, workspace_min, workspace_max, guide] =
       s.indenter;
   [[maybe_unused]] const auto& [tolerance, max_iterations] = s.contact;
@@ -662,8 +662,9 @@ TEST(SceneSchema, WireFieldsAreTheReadersFields) {
   for (const WireField& f : wire_fields()) wire_paths.insert(f.pointer);
   for (const std::string& p : scene_field_paths()) file_paths.insert(p);
   for (const std::string& p : file_paths)
-    if (!kFileOnlyFields.count(p))
+    if (!kFileOnlyFields.count(p)) {
       EXPECT_TRUE(wire_paths.count(p)) << kCapnp << ": the scene-file field " << p << " has no wire field";
+    }
   for (const std::string& p : wire_paths)
     EXPECT_TRUE(file_paths.count(p)) << kCapnp << ": the wire field at " << p << " is no scene-file field";
 }
