@@ -114,8 +114,16 @@ std::string reference_key(const Scene& scene) {
   std::ostringstream o;
   o.precision(12);
   o << "box=" << vec_text(scene.box.min) << vec_text(scene.box.max) << " E=" << scene.material.young_modulus
-    << " nu=" << scene.material.poisson_ratio << " fixed=" << scene.fixed_faces << " R=" << scene.indenter.radius
-    << " site=";
+    << " nu=" << scene.material.poisson_ratio;
+  // A heterogeneous body is another problem (a homogeneous body's key is unchanged).
+  for (const InclusionSpec& inc : scene.material.inclusions) {
+    if (inc.shape == InclusionShape::sphere)
+      o << " sphere=" << vec_text(inc.center) << inc.radius;
+    else
+      o << " inclusion_box=" << vec_text(inc.min) << vec_text(inc.max);
+    o << ",E=" << inc.young_modulus << ",nu=" << inc.poisson_ratio;
+  }
+  o << " fixed=" << scene.fixed_faces << " R=" << scene.indenter.radius << " site=";
   const Eigen::Vector2d site = indenter_site(scene);
   if (at_top_face_centre(scene, site))
     o << "centre";

@@ -8,6 +8,7 @@
 #include <random>
 #include <string>
 
+#include "analysis/reference.h"
 #include "core/hex_fem.h"
 #include "core/material_field.h"
 #include "core/mls_forces.h"
@@ -110,6 +111,17 @@ TEST(InclusionScene, TheOverrideSetsTheArray) {
     EXPECT_EQ(e.field(), "/material/inclusions/0/sphere/radius");
     EXPECT_NE(e.source().find("override material.inclusions="), std::string::npos) << e.what();
   }
+}
+
+// A stored finite-block reference is keyed by the problem: an inclusion changes the key,
+// a homogeneous scene keeps its key.
+TEST(InclusionScene, TheReferenceKeyNamesTheInclusions) {
+  const Scene plain = test::scene_from_json("{}");
+  const Scene with = test::scene_from_json(
+      R"({"material": {"inclusions": [{"sphere": {"center": [0, 0, -0.5], "radius": 0.25}, "young_modulus": 3e4, "poisson_ratio": 0.3}]}})");
+  EXPECT_NE(reference_key(plain), reference_key(with));
+  EXPECT_EQ(reference_key(plain).find("sphere"), std::string::npos) << reference_key(plain);
+  EXPECT_NE(reference_key(with).find("sphere=[0,0,-0.5]0.25,E=30000,nu=0.3"), std::string::npos) << reference_key(with);
 }
 
 // ---------------------------------------------------------------------------
