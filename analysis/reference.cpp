@@ -114,12 +114,20 @@ std::string reference_key(const Scene& scene) {
   std::ostringstream o;
   o.precision(12);
   o << "box=" << vec_text(scene.box.min) << vec_text(scene.box.max) << " E=" << scene.material.young_modulus
-    << " nu=" << scene.material.poisson_ratio << " fixed=" << scene.fixed_faces;
+    << " nu=" << scene.material.poisson_ratio;
+  // A heterogeneous body is another problem (a homogeneous body's key is unchanged).
+  for (const InclusionSpec& inc : scene.material.inclusions) {
+    if (inc.shape == InclusionShape::sphere)
+      o << " sphere=" << vec_text(inc.center) << inc.radius;
+    else
+      o << " inclusion_box=" << vec_text(inc.min) << vec_text(inc.max);
+    o << ",E=" << inc.young_modulus << ",nu=" << inc.poisson_ratio;
+  }
+  o << " fixed=" << scene.fixed_faces;
   for (const FixedRegion& f : scene.fixed_regions)  // (none in the stored references: their keys stay)
     o << "+" << static_cast<int>(f.kind) << ":" << f.group << vec_text(f.point) << vec_text(f.normal) << f.tolerance
       << vec_text(f.min) << vec_text(f.max) << vec_text(f.center) << f.radius;
-  o << " R=" << scene.indenter.radius
-    << " site=";
+  o << " R=" << scene.indenter.radius << " site=";
   const Eigen::Vector2d site = indenter_site(scene);
   if (at_top_face_centre(scene, site))
     o << "centre";

@@ -12,6 +12,7 @@
 #include "core/consistent_integration.h"
 #include "core/time_step.h"
 #include "core/kernel.h"
+#include "core/material_field.h"
 #include "core/model.h"
 #include "core/neighbors.h"
 #include "core/node_cloud.h"
@@ -78,11 +79,15 @@ void build_force_blocks(Model& m) {
       if (i >= n) {  // padding lane: weightless, its neighbours are particle 0, F = I (stress free, and
                      // no law meets a singular F there: the vectorised polar decomposition needs det F > 0)
         block.volume[l] = 0.0;
+        block.lame_lambda[l] = m.lame_lambda;
+        block.lame_mu[l] = m.lame_mu;
         for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
         for (int c = 0; c < 3; ++c) block.self_weight[c][l] = 0.0;
         continue;
       }
       block.volume[l] = m.volume[i];
+      block.lame_lambda[l] = m.particle_lambda[i];
+      block.lame_mu[l] = m.particle_mu[i];
       for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = m.rest_correction[9 * static_cast<size_t>(i) + k];
       const int count = m.neighbor_offset[i + 1] - m.neighbor_offset[i];
       for (int s = 0; s < longest; ++s) {
@@ -108,6 +113,30 @@ void set_material(Model& m, const MaterialSpec& mat) {
   m.law = mat.law;
   m.density = mat.density;
   m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / mat.density);
+}
+
+// The per-particle material (material_field.h): each particle's cell (its lattice cell on
+// grid and graded_grid clouds, else a cube of volume v_i) blended over the inclusions (1.16);
+// masses m_i = rho_i v_i (the volumes are the matrix's: the masses scale by rho_i / rho).
+// Sets Model::wave_speed to the fastest p-wave present.
+void set_particle_materials(Model& m, const Scene& scene, const NodeCloud& cloud) {
+  Points cell_min, cell_max;
+  const bool lattice = (scene.distribution.type == DistributionType::grid ||
+                        scene.distribution.type == DistributionType::graded_grid) &&
+                       cloud.lattice_size.prod() == m.particle_count;
+  if (lattice)
+    lattice_cells(m.rest_position, cloud.lattice_size, cell_min, cell_max);
+  else
+    cube_cells(m.rest_position, m.volume, cell_min, cell_max);
+  MaterialField field = material_field(scene.material, cell_min, cell_max);
+  m.particle_lambda = std::move(field.lambda);
+  m.particle_mu = std::move(field.mu);
+  m.particle_density = std::move(field.density);
+  m.wave_speed = 0.0;
+  for (int i = 0; i < m.particle_count; ++i) {
+    if (m.particle_density[i] != m.density) m.mass[i] *= m.particle_density[i] / m.density;
+    m.wave_speed = std::max(m.wave_speed, std::sqrt((m.particle_lambda[i] + 2 * m.particle_mu[i]) / m.particle_density[i]));
+  }
 }
 
 // The MLS solid: supports, volumes, moment matrices, gradient weights, hourglass weights.
@@ -209,6 +238,7 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
     }
   }
   m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
+  set_particle_materials(m, scene, cloud);
 
   // Moment matrices and gradient weights (A-6 ... A-9, M-14, M-15):
   // A_i = sum_j w_ij x_ij x_ij^T, d_j = A_i^-1 x_ij w_ij.
@@ -256,7 +286,7 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
     m.hourglass_weight.resize(nnz);
     m.neighbor_rest_offset.resize(3, nnz);
     for (int i = 0; i < n; ++i) {
-      const double kappa = scene.mls.hourglass * 2 * m.lame_mu * m.volume[i] / moment_trace[i];
+      const double kappa = scene.mls.hourglass * 2 * m.particle_mu[i] * m.volume[i] / moment_trace[i];
       for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
         m.hourglass_weight[a] = kappa * weight[a];
         m.neighbor_rest_offset.col(a) = X.col(m.neighbor_index[a]) - X.col(i);
@@ -268,13 +298,19 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
 
 // The hexahedral FEM reference: the lattice's bricks, lumped masses (rho times the
 // nodes' lattice volumes = the row sums of the consistent mass of trilinear bricks).
-void build_hex_fem(Model& m, const HexFemSpec& spec, const NodeCloud& cloud) {
+// Heterogeneous: each element's Lame parameters from its brick's samples (1.16), each node's
+// density from its lattice cell.
+void build_hex_fem(Model& m, const HexFemSpec& spec, const MaterialSpec& material, const NodeCloud& cloud) {
   m.solid = SolidKind::hex_fem;
   m.hex = hex_mesh(m.rest_position, cloud.lattice_size, m.lame_lambda, m.lame_mu, spec.formulation,
-                   spec.volumetric_integration);
+                   spec.volumetric_integration, material.inclusions.empty() ? nullptr : &material);
   m.volume = cloud.lattice_volume;
   m.mass.resize(m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) m.mass[i] = m.density * m.volume[i];
+  Scene lattice_scene;  // set_particle_materials needs only the distribution type and the material
+  lattice_scene.distribution.type = DistributionType::grid;
+  lattice_scene.material = material;
+  set_particle_materials(m, lattice_scene, cloud);
   m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
   m.min_spacing = INFINITY;
   for (const Vec3& size : m.hex.element_size) {
@@ -363,7 +399,7 @@ Model build_model(const Scene& scene) {
   if (scene.model == "mls")
     build_mls(m, scene, cloud);
   else if (scene.model == "hex_fem")
-    build_hex_fem(m, scene.hex_fem, cloud);
+    build_hex_fem(m, scene.hex_fem, scene.material, cloud);
   else
     throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
   set_boundary_and_indenter(m, scene, cloud);

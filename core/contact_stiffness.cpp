@@ -46,8 +46,8 @@ std::vector<Mat3> reference_diagonal(const Model& m) {
     }
     return D;
   }
-  const double mu = m.lame_mu, lm = m.lame_lambda + m.lame_mu + m.volume_stiffness;
-  auto add = [&](int node, double v, const Vec3& d) {
+  auto add = [&](int node, double v, int i, const Vec3& d) {  // particle i's own Lame parameters
+    const double mu = m.particle_mu[i], lm = m.particle_lambda[i] + m.particle_mu[i] + m.volume_stiffness;
     D[node] += v * (mu * d.squaredNorm() * Mat3::Identity() + lm * d * d.transpose());
   };
   const bool hourglass = !m.hourglass_weight.empty();
@@ -55,14 +55,14 @@ std::vector<Mat3> reference_diagonal(const Model& m) {
     Vec3 d_self = Vec3::Zero();
     for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
       const Vec3 d = m.gradient_weight.col(a);
-      add(m.neighbor_index[a], m.volume[i], d);
+      add(m.neighbor_index[a], m.volume[i], i, d);
       d_self -= d;
       if (hourglass) {
         D[i] += m.hourglass_weight[a] * Mat3::Identity();
         D[m.neighbor_index[a]] += m.hourglass_weight[a] * Mat3::Identity();
       }
     }
-    add(i, m.volume[i], d_self);
+    add(i, m.volume[i], i, d_self);
   }
   return D;
 }

@@ -68,6 +68,7 @@ HealthLimits health_limits(const Model& model, const Options& opt) {
   // docs/scene-format.md, "health": 1/2 M (c_p / 400)^2, the kinetic energy of the free
   // body moving at the particle speed of a p-wave of strain 1/400 (c_p of docs/physics.md (1.10);
   // 0.92 cm/s in the default material). It scales with the scene: M ~ L^3, c_p from the material.
+  // (The matrix material's c_p: the floor is a scale of the bulk body, not of its inclusions.)
   const double c_p = std::sqrt((model.lame_lambda + 2 * model.lame_mu) / model.density);
   l.energy_floor = 0.5 * model.free_mass * std::pow(kEnergyFloorStrain * c_p, 2);
   l.max_indenter_speed = spec.max_indenter_speed > 0 ? spec.max_indenter_speed : model.min_spacing / dt;

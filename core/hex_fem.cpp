@@ -1,11 +1,14 @@
 #include "core/hex_fem.h"
 
-#include "core/hex_neo_hookean.h"
-
 #include <Eigen/Geometry>
+#include <bit>
 #include <cmath>
 #include <map>
 #include <stdexcept>
+#include <tuple>
+
+#include "core/hex_neo_hookean.h"
+#include "core/material_field.h"
 
 namespace palpate {
 
@@ -92,14 +95,15 @@ ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, 
 }
 
 HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lambda, double mu,
-                 HexFormulation formulation, HexVolumetricIntegration volumetric) {
+                 HexFormulation formulation, HexVolumetricIntegration volumetric,
+                 const MaterialSpec* heterogeneous) {
   const int nx = per_axis[0], ny = per_axis[1], nz = per_axis[2];
   if (static_cast<long>(nx) * ny * nz != rest.cols())
     throw std::invalid_argument("hex_mesh: node count does not match the lattice size");
   HexMesh mesh;
   mesh.formulation = formulation;
-  // Distinct element sizes share one stiffness matrix (a regular grid has one).
-  std::map<std::array<long long, 3>, int> type_of_size;
+  // Distinct (element size, lambda, mu) share one stiffness matrix (a regular homogeneous grid has one).
+  std::map<std::tuple<long long, long long, long long, uint64_t, uint64_t>, int> type_of_size;
   auto node = [&](int a, int b, int c) { return a + nx * (b + ny * c); };
   for (int c = 0; c + 1 < nz; ++c)
     for (int b = 0; b + 1 < ny; ++b)
@@ -111,12 +115,21 @@ HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lam
                         rest(2, nodes[4]) - rest(2, nodes[0]));
         // Key on the size rounded to 1e-12 of the largest edge so equal bricks share K_e.
         const double unit = 1e-12 * size.maxCoeff();
-        const std::array<long long, 3> key = {std::llround(size[0] / unit), std::llround(size[1] / unit),
-                                              std::llround(size[2] / unit)};
+        double element_lambda = lambda, element_mu = mu;
+        if (heterogeneous) {
+          const CellMaterial c = cell_material(*heterogeneous, rest.col(nodes[0]), rest.col(nodes[6]));
+          element_lambda = c.lambda;
+          element_mu = c.mu;
+        }
+        const auto key = std::make_tuple(std::llround(size[0] / unit), std::llround(size[1] / unit),
+                                         std::llround(size[2] / unit), std::bit_cast<uint64_t>(element_lambda),
+                                         std::bit_cast<uint64_t>(element_mu));
         auto [it, inserted] = type_of_size.emplace(key, static_cast<int>(mesh.element_size.size()));
         if (inserted) {
           mesh.element_size.push_back(size);
-          mesh.element_stiffness.push_back(hex_element_stiffness(size, lambda, mu, volumetric));
+          mesh.element_lambda.push_back(element_lambda);
+          mesh.element_mu.push_back(element_mu);
+          mesh.element_stiffness.push_back(hex_element_stiffness(size, element_lambda, element_mu, volumetric));
           std::array<BrickGradients, 8> gauss;
           const double g = 1.0 / std::sqrt(3.0);
           for (int q = 0; q < 8; ++q) {
@@ -125,8 +138,6 @@ HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lam
           }
           mesh.gauss_gradients.push_back(gauss);
           mesh.gauss_weight.push_back(size.prod() / 8.0);
-          mesh.type_lambda.push_back(lambda);
-          mesh.type_mu.push_back(mu);
         }
         mesh.element_nodes.push_back(nodes);
         mesh.element_type.push_back(it->second);

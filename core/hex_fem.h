@@ -30,14 +30,15 @@ struct HexMesh {
   // in the (x, y, z) lattice directions.
   std::vector<std::array<int, 8>> element_nodes;  // element_count
   std::vector<int> element_type;                  // element_count: index into the arrays below
-  std::vector<ElementMatrix> element_stiffness;   // K_e per distinct element size (A regular grid has one.)
-  std::vector<Eigen::Vector3d> element_size;      // edge lengths (hx, hy, hz) per distinct element size
+  std::vector<ElementMatrix> element_stiffness;   // K_e per distinct (element size, lambda, mu) (A regular
+                                                  // homogeneous grid has one.)
+  std::vector<Eigen::Vector3d> element_size;      // edge lengths (hx, hy, hz) per type
+  std::vector<double> element_lambda, element_mu; // Lame parameters per type, Pa
   // Per element type, for the neo-Hookean formulation (core/hex_neo_hookean.h): the shape
-  // gradients at the 2x2x2 Gauss points (+-1/sqrt 3)^3 in kCorner order, the Gauss weight
-  // hx hy hz / 8, and the Lame parameters, Pa.
+  // gradients at the 2x2x2 Gauss points (+-1/sqrt 3)^3 in kCorner order and the Gauss weight
+  // hx hy hz / 8.
   std::vector<std::array<BrickGradients, 8>> gauss_gradients;
   std::vector<double> gauss_weight;
-  std::vector<double> type_lambda, type_mu;
 };
 
 
@@ -47,10 +48,13 @@ ElementMatrix hex_element_stiffness(const Eigen::Vector3d& size, double lambda, 
                                     HexVolumetricIntegration volumetric = HexVolumetricIntegration::full);
 
 // The mesh of a lattice with `per_axis` nodes per axis, node i = a + nx (b + ny c),
-// coordinates taken from `rest_position` (which may be graded along each axis).
+// coordinates taken from `rest_position` (which may be graded along each axis). With
+// `heterogeneous` (a material with inclusions), each element's lambda, mu are its brick's
+// blend (material_field.h, (1.16)) instead of the given ones, the matrix's.
 HexMesh hex_mesh(const Points& rest_position, const Eigen::Vector3i& per_axis, double lambda, double mu,
                  HexFormulation formulation,
-                 HexVolumetricIntegration volumetric = HexVolumetricIntegration::full);
+                 HexVolumetricIntegration volumetric = HexVolumetricIntegration::full,
+                 const MaterialSpec* heterogeneous = nullptr);
 
 // Rotation of an element from its current node positions (columns of F at the
 // centre, Gram-Schmidt on the x and y directions as SOFA's "large" method).

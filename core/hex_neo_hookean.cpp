@@ -26,8 +26,8 @@ void hex_neo_hookean_add_forces(const HexMesh& mesh, const Points& x, Points& f)
     for (int q = 0; q < 8; ++q) {
       const BrickGradients& G = mesh.gauss_gradients[type][q];
       Mat3 P, inverse_transpose;
-      hyperelastic::neo_hookean_stress(deformation_gradient(x, nodes, G), mesh.type_lambda[type],
-                                       mesh.type_mu[type], P, inverse_transpose);
+      hyperelastic::neo_hookean_stress(deformation_gradient(x, nodes, G), mesh.element_lambda[type],
+                                       mesh.element_mu[type], P, inverse_transpose);
       // (5.5): f_a = -sum_g w_g P_g grad N_a(xi_g).
       const Mat3 wP = w * P;
       for (int a = 0; a < 8; ++a) f.col(nodes[a]).noalias() -= wP * G.col(a);
@@ -43,7 +43,7 @@ double hex_neo_hookean_energy(const HexMesh& mesh, const Points& x) {
       Mat3 P, inverse_transpose;
       U += mesh.gauss_weight[type] *
            hyperelastic::neo_hookean_stress(deformation_gradient(x, mesh.element_nodes[e], mesh.gauss_gradients[type][q]),
-                                            mesh.type_lambda[type], mesh.type_mu[type], P, inverse_transpose);
+                                            mesh.element_lambda[type], mesh.element_mu[type], P, inverse_transpose);
     }
   }
   return U;
@@ -58,7 +58,7 @@ void hex_neo_hookean_linearize(const HexMesh& mesh, const Points& x, std::vector
       Eigen::Map<Mat3> F(slot), inverse_transpose(slot + 9);
       F = deformation_gradient(x, mesh.element_nodes[e], mesh.gauss_gradients[type][q]);
       Mat3 P, G;
-      hyperelastic::neo_hookean_stress(F, mesh.type_lambda[type], mesh.type_mu[type], P, G);
+      hyperelastic::neo_hookean_stress(F, mesh.element_lambda[type], mesh.element_mu[type], P, G);
       inverse_transpose = G;
     }
   }
@@ -77,7 +77,7 @@ void hex_neo_hookean_force_differential(const HexMesh& mesh, const std::vector<d
       const BrickGradients& G = mesh.gauss_gradients[type][q];
       // (5.6): df_a = -sum_g w_g dP(F_g; dF_g) grad N_a, dF_g = sum_b dx_b (grad N_b)^T.
       const Mat3 dP = hyperelastic::neo_hookean_differential(F, inverse_transpose, deformation_gradient(dx, nodes, G),
-                                                             mesh.type_lambda[type], mesh.type_mu[type]);
+                                                             mesh.element_lambda[type], mesh.element_mu[type]);
       const Mat3 wdP = w * dP;
       for (int a = 0; a < 8; ++a) df.col(nodes[a]).noalias() -= wdP * G.col(a);
     }

@@ -183,24 +183,25 @@ inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volum
   return volume_stiffness * ((C.array() * dF.array()).sum() * C + (J - 1) * dC);
 }
 
-// First Piola stress P of particle i (elastic + volume term) and its energy density.
+// First Piola stress P of a particle with Lame parameters lambda, mu (its own:
+// Model::particle_lambda, particle_mu) (elastic + volume term) and its energy density.
 // S_out receives what the tangent needs: S (St Venant-Kirchhoff), R (corotational) or
 // F^-T (neo-Hookean); the linear law needs nothing (I).
-inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out = nullptr) {
+inline double piola_stress(const Model& m, const Mat3& F, double lambda, double mu, Mat3& P, Mat3* S_out = nullptr) {
   Mat3 S = Mat3::Identity();
   double psi = 0;
   switch (m.law) {
     case MaterialLaw::corotational:
-      psi = corotational_stress(F, m.lame_lambda, m.lame_mu, P, S);
+      psi = corotational_stress(F, lambda, mu, P, S);
       break;
     case MaterialLaw::linear:
-      psi = linear_stress(F, m.lame_lambda, m.lame_mu, P);
+      psi = linear_stress(F, lambda, mu, P);
       break;
     case MaterialLaw::neo_hookean:
-      psi = neo_hookean_stress(F, m.lame_lambda, m.lame_mu, P, S);
+      psi = neo_hookean_stress(F, lambda, mu, P, S);
       break;
     case MaterialLaw::stvk:
-      psi = stvk_stress(F, m.lame_lambda, m.lame_mu, S);
+      psi = stvk_stress(F, lambda, mu, S);
       P = F * S;
       break;
   }
@@ -215,24 +216,25 @@ inline double piola_stress(const Model& m, const Mat3& F, Mat3& P, Mat3* S_out =
 }
 
 // dP of piola_stress at (F, S) along dF, S what piola_stress returned in S_out.
-inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, const Mat3& dF) {
+inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, const Mat3& dF, double lambda,
+                               double mu) {
   Mat3 dP;
   switch (m.law) {
     case MaterialLaw::corotational:  // S holds R
-      dP = corotational_differential(F, S, dF, m.lame_lambda, m.lame_mu);
+      dP = corotational_differential(F, S, dF, lambda, mu);
       break;
     case MaterialLaw::neo_hookean:  // S holds F^-T
-      dP = neo_hookean_differential(F, S, dF, m.lame_lambda, m.lame_mu);
+      dP = neo_hookean_differential(F, S, dF, lambda, mu);
       break;
     case MaterialLaw::linear:  // dP = 2 mu sym(dF) + lambda tr(dF) I
-      dP = m.lame_mu * (dF + dF.transpose());
-      dP.diagonal().array() += m.lame_lambda * dF.trace();
+      dP = mu * (dF + dF.transpose());
+      dP.diagonal().array() += lambda * dF.trace();
       break;
     case MaterialLaw::stvk: {  // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS.
       const Mat3 FtdF = F.transpose() * dF;
       const Mat3 dE = 0.5 * (FtdF + FtdF.transpose());
-      Mat3 dS = (2 * m.lame_mu) * dE;
-      dS.diagonal().array() += m.lame_lambda * dE.trace();
+      Mat3 dS = (2 * mu) * dE;
+      dS.diagonal().array() += lambda * dE.trace();
       dP = dF * S + F * dS;
       break;
     }
@@ -249,7 +251,7 @@ void internal_forces_per_particle(const Model& m, const double* x, double* f) {
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x, i);
     Mat3 P;
-    piola_stress(m, F, P);
+    piola_stress(m, F, m.particle_lambda[i], m.particle_mu[i], P);
     // Forces: f_j = -v_i P d_j on every neighbour, f_i = -v_i P d_i = v_i P sum_j d_j.
     Mat3 vP = m.volume[i] * P;
     if (hourglass) {
@@ -286,7 +288,7 @@ void force_differential_per_particle(const Model& m, const double* tangent_F, co
     const Vec3 dxi = Eigen::Map<const Vec3>(dx + 3 * i);
     for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a)
       dF += (Eigen::Map<const Vec3>(dx + 3 * idx[a]) - dxi) * Eigen::Map<const Vec3>(D + 3 * a).transpose();
-    Mat3 vdP = m.volume[i] * piola_differential(m, F, S, dF);
+    Mat3 vdP = m.volume[i] * piola_differential(m, F, S, dF, m.particle_lambda[i], m.particle_mu[i]);
     if (!m.hourglass_weight.empty()) {  // the hourglass energy is quadratic: same form with (dx, dF)
       Mat3 G;
       hourglass_forces(m, dx, i, dF, G, df);
@@ -438,12 +440,13 @@ PALPATE_INLINE void add_weighted_volume_term(const Model& m, const Mat3Lanes& F,
 // St Venant-Kirchhoff S = lambda tr(E) I + 2 mu E, P = F S, plus the volume
 // term k_v (J - 1) cof F when volume_term. The volume v_i is folded into S.
 template <bool volume_term>
-PALPATE_INLINE void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+PALPATE_INLINE void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
+                                          const Lanes mu, Mat3Lanes& vP) {
   auto FtF = [&](int a, int b) { return F(0, a) * F(0, b) + F(1, a) * F(1, b) + F(2, a) * F(2, b); };
   const Lanes E00 = 0.5 * FtF(0, 0) - 0.5, E11 = 0.5 * FtF(1, 1) - 0.5, E22 = 0.5 * FtF(2, 2) - 0.5;
   const Lanes E01 = 0.5 * FtF(0, 1), E02 = 0.5 * FtF(0, 2), E12 = 0.5 * FtF(1, 2);
-  const Lanes v_lambda_trE = (m.lame_lambda * v) * (E00 + E11 + E22);
-  const Lanes v_2mu = (2 * m.lame_mu) * v;
+  const Lanes v_lambda_trE = (lambda * v) * (E00 + E11 + E22);
+  const Lanes v_2mu = (2 * mu) * v;
   Mat3Lanes vS;  // v S (symmetric)
   vS(0, 0) = v_lambda_trE + v_2mu * E00;
   vS(1, 1) = v_lambda_trE + v_2mu * E11;
@@ -477,13 +480,13 @@ PALPATE_INLINE void add_volume_term_differential(const Model& m, const Mat3Lanes
 // volume term k_v [(cof F : dF) cof F + (J - 1) d cof F].
 template <bool volume_term>
 PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& S, const Mat3Lanes& dF,
-                                        const Lanes v, Mat3Lanes& vdP) {
+                                        const Lanes v, const Lanes lambda, const Lanes mu, Mat3Lanes& vdP) {
   auto FtdF = [&](int a, int b) { return F(0, a) * dF(0, b) + F(1, a) * dF(1, b) + F(2, a) * dF(2, b); };
   const Lanes dE00 = FtdF(0, 0), dE11 = FtdF(1, 1), dE22 = FtdF(2, 2);
   const Lanes dE01 = 0.5 * (FtdF(0, 1) + FtdF(1, 0)), dE02 = 0.5 * (FtdF(0, 2) + FtdF(2, 0)),
               dE12 = 0.5 * (FtdF(1, 2) + FtdF(2, 1));
-  const Lanes lambda_trdE = m.lame_lambda * (dE00 + dE11 + dE22);
-  const double two_mu = 2 * m.lame_mu;
+  const Lanes lambda_trdE = lambda * (dE00 + dE11 + dE22);
+  const Lanes two_mu = 2 * mu;
   Mat3Lanes dS;  // symmetric
   dS(0, 0) = lambda_trdE + two_mu * dE00;
   dS(1, 1) = lambda_trdE + two_mu * dE11;
@@ -549,11 +552,12 @@ PALPATE_INLINE bool polar_rotation_lanes(const Mat3Lanes& F, Mat3Lanes& R) {
 
 // v_i P_i of the laws other than St Venant-Kirchhoff, one lane at a time (the polar
 // decomposition iterates a data-dependent number of times); the gather and scatter stay blocked.
-PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
+                                             const Lanes mu, Mat3Lanes& vP) {
   for (int l = 0; l < kLanes; ++l) {
     Mat3 Fl, P;
     for (int k = 0; k < 9; ++k) Fl(k % 3, k / 3) = F.m[k][l];
-    piola_stress(m, Fl, P);
+    piola_stress(m, Fl, lambda[l], mu[l], P);
     for (int k = 0; k < 9; ++k) vP.m[k][l] = v[l] * P(k % 3, k / 3);
   }
 }
@@ -561,14 +565,15 @@ PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F,
 // v_i P_i of the corotational law, P = 2 mu (F - R) + lambda (tr(R^T F) - 3) R, on all
 // four lanes together (the volume term added when volume_term).
 template <bool volume_term>
-PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
+                                                 const Lanes mu, Mat3Lanes& vP) {
   Mat3Lanes R;
-  if (!polar_rotation_lanes(F, R)) return weighted_stress_per_lane(m, F, v, vP);
+  if (!polar_rotation_lanes(F, R)) return weighted_stress_per_lane(m, F, v, lambda, mu, vP);
   Lanes trace_strain = R.m[0] * F.m[0];
   PALPATE_UNROLL
   for (int k = 1; k < 9; ++k) trace_strain += R.m[k] * F.m[k];
   trace_strain -= 3.0;
-  const Lanes v_2mu = (2 * m.lame_mu) * v, v_lambda_tr = (m.lame_lambda * v) * trace_strain;
+  const Lanes v_2mu = (2 * mu) * v, v_lambda_tr = (lambda * v) * trace_strain;
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vP.m[k] = v_2mu * (F.m[k] - R.m[k]) + v_lambda_tr * R.m[k];
   if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
@@ -576,7 +581,8 @@ PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes
 
 // v_i dP_i of the laws other than St Venant-Kirchhoff at (F_i, S_i) along dF_i, one lane at a time.
 PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lanes& F, const Mat3Lanes& S,
-                                                   const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
+                                                   const Mat3Lanes& dF, const Lanes v, const Lanes lambda,
+                                                   const Lanes mu, Mat3Lanes& vdP) {
   for (int l = 0; l < kLanes; ++l) {
     Mat3 Fl, Sl, dFl;
     for (int k = 0; k < 9; ++k) {
@@ -584,7 +590,7 @@ PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lan
       Sl(k % 3, k / 3) = S.m[k][l];
       dFl(k % 3, k / 3) = dF.m[k][l];
     }
-    const Mat3 dP = piola_differential(m, Fl, Sl, dFl);
+    const Mat3 dP = piola_differential(m, Fl, Sl, dFl, lambda[l], mu[l]);
     for (int k = 0; k < 9; ++k) vdP.m[k][l] = v[l] * dP(k % 3, k / 3);
   }
 }
@@ -607,11 +613,12 @@ PALPATE_INLINE bool log_det_lanes(const Mat3Lanes& F, Mat3Lanes& C, Lanes& J, La
 // lanes together (ln J one lane at a time); a lane with J <= 0 sends the block to the
 // per-lane formula (no stress from the law at J <= 0).
 template <bool volume_term>
-PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes& F, const Lanes v, Mat3Lanes& vP) {
+PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
+                                                const Lanes mu, Mat3Lanes& vP) {
   Mat3Lanes C;
   Lanes J, log_J;
-  if (!log_det_lanes(F, C, J, log_J)) return weighted_stress_per_lane(m, F, v, vP);
-  const Lanes v_mu = m.lame_mu * v, scale = v * (m.lame_lambda * log_J - m.lame_mu) / J;
+  if (!log_det_lanes(F, C, J, log_J)) return weighted_stress_per_lane(m, F, v, lambda, mu, vP);
+  const Lanes v_mu = mu * v, scale = v * (lambda * log_J - mu) / J;
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vP.m[k] = v_mu * F.m[k] + scale * C.m[k];
   if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
@@ -621,10 +628,11 @@ PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes&
 // dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G (+ the volume term's).
 template <bool volume_term>
 PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& G,
-                                                      const Mat3Lanes& dF, const Lanes v, Mat3Lanes& vdP) {
+                                                      const Mat3Lanes& dF, const Lanes v, const Lanes lambda,
+                                                      const Lanes mu, Mat3Lanes& vdP) {
   Mat3Lanes C;
   Lanes J, log_J;
-  if (!log_det_lanes(F, C, J, log_J)) return weighted_differential_per_lane(m, F, G, dF, v, vdP);
+  if (!log_det_lanes(F, C, J, log_J)) return weighted_differential_per_lane(m, F, G, dF, v, lambda, mu, vdP);
   Mat3Lanes T;  // dF^T G
   PALPATE_UNROLL
   for (int a = 0; a < 3; ++a)
@@ -633,13 +641,13 @@ PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3
   Lanes G_dF = G.m[0] * dF.m[0];
   PALPATE_UNROLL
   for (int k = 1; k < 9; ++k) G_dF += G.m[k] * dF.m[k];
-  const Lanes a = m.lame_mu - m.lame_lambda * log_J, b = m.lame_lambda * G_dF;
+  const Lanes a = mu - lambda * log_J, b = lambda * G_dF;
   Mat3Lanes dP;
   PALPATE_UNROLL
   for (int r = 0; r < 3; ++r)
     PALPATE_UNROLL
     for (int c = 0; c < 3; ++c)
-      dP(r, c) = m.lame_mu * dF(r, c) + a * (G(r, 0) * T(0, c) + G(r, 1) * T(1, c) + G(r, 2) * T(2, c)) + b * G(r, c);
+      dP(r, c) = mu * dF(r, c) + a * (G(r, 0) * T(0, c) + G(r, 1) * T(1, c) + G(r, 2) * T(2, c)) + b * G(r, c);
   if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
@@ -659,14 +667,15 @@ void internal_forces_blocked(const Model& m, const double* __restrict x, double*
     for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
     add_gradient(begin, end, x, i, F);
     Mat3Lanes vP;
+    const Lanes v = load(block.volume), lambda = load(block.lame_lambda), mu = load(block.lame_mu);
     if (m.law == MaterialLaw::corotational)
-      weighted_corotational_stress<volume_term>(m, F, load(block.volume), vP);
+      weighted_corotational_stress<volume_term>(m, F, v, lambda, mu, vP);
     else if (m.law == MaterialLaw::neo_hookean)
-      weighted_neo_hookean_stress<volume_term>(m, F, load(block.volume), vP);
+      weighted_neo_hookean_stress<volume_term>(m, F, v, lambda, mu, vP);
     else if (m.law != MaterialLaw::stvk)
-      weighted_stress_per_lane(m, F, load(block.volume), vP);
+      weighted_stress_per_lane(m, F, v, lambda, mu, vP);
     else
-      weighted_piola_stress<volume_term>(m, F, load(block.volume), vP);
+      weighted_piola_stress<volume_term>(m, F, v, lambda, mu, vP);
     scatter_forces(block, begin, end, vP, i, std::min(kLanes, n - kLanes * b), f);
   }
 }
@@ -686,12 +695,13 @@ void force_differential_blocked(const Model& m, const double* tangent_F, const d
     Mat3Lanes F, S, vdP;
     gather_matrices(tangent_F, i, F);
     gather_matrices(tangent_S_or_R, i, S);
+    const Lanes v = load(block.volume), lambda = load(block.lame_lambda), mu = load(block.lame_mu);
     if (m.law == MaterialLaw::neo_hookean)  // S holds F^-T
-      weighted_neo_hookean_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
+      weighted_neo_hookean_differential<volume_term>(m, F, S, dF, v, lambda, mu, vdP);
     else if (m.law != MaterialLaw::stvk)  // S holds R for the corotational law
-      weighted_differential_per_lane(m, F, S, dF, load(block.volume), vdP);
+      weighted_differential_per_lane(m, F, S, dF, v, lambda, mu, vdP);
     else
-      weighted_piola_differential<volume_term>(m, F, S, dF, load(block.volume), vdP);
+      weighted_piola_differential<volume_term>(m, F, S, dF, v, lambda, mu, vdP);
     scatter_forces(block, begin, end, vdP, i, std::min(kLanes, n - kLanes * b), df);
   }
 }
@@ -710,7 +720,9 @@ bool detail::uses_blocked_loops(const Model& model) { return use_blocks(model); 
 
 Mat3 deformation_gradient(const Model& model, const Points& x, int i) { return gradient_at(model, x.data(), i); }
 
-double first_piola_stress(const Model& model, const Mat3& F, Mat3& P) { return piola_stress(model, F, P); }
+double first_piola_stress(const Model& model, const Mat3& F, Mat3& P) {
+  return piola_stress(model, F, model.lame_lambda, model.lame_mu, P);
+}
 
 void mls_internal_forces(const Model& m, const Points& x, Points& f) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
@@ -729,7 +741,7 @@ double mls_strain_energy(const Model& m, const Points& x) {
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
     Mat3 P;
-    U += m.volume[i] * piola_stress(m, F, P);
+    U += m.volume[i] * piola_stress(m, F, m.particle_lambda[i], m.particle_mu[i], P);
     if (!m.hourglass_weight.empty()) {
       Mat3 G;
       U += hourglass_forces(m, x.data(), i, F, G, nullptr);
@@ -746,7 +758,7 @@ void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent
   for (int i = 0; i < m.particle_count; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
     Mat3 P, S;
-    piola_stress(m, F, P, &S);  // S, or R (corotational), or F^-T (neo-Hookean)
+    piola_stress(m, F, m.particle_lambda[i], m.particle_mu[i], P, &S);  // S, or R (corotational), or F^-T (neo-Hookean)
     Eigen::Map<Mat3> F_out(&tangent_F[9 * static_cast<size_t>(i)]), S_out(&tangent_S_or_R[9 * static_cast<size_t>(i)]);
     F_out = F;
     S_out = S;

@@ -22,7 +22,8 @@ double mls_strain_energy(const Model& model, const Points& x);
 // Deformation gradient of particle i: F_i = sum_j (x_j - x_i) d_j^T + C_i.
 Mat3 deformation_gradient(const Model& model, const Points& x, int i);
 
-// Material law of one particle: first Piola stress P (St Venant-Kirchhoff F S, corotational,
+// Material law of the matrix material (Model::lame_lambda, lame_mu; the forces use each
+// particle's own, Model::particle_lambda, particle_mu): first Piola stress P (St Venant-Kirchhoff F S, corotational,
 // linear or neo-Hookean, + k_v (J - 1) cof F) for deformation gradient F; returns the energy
 // density psi, J/m^3 (+infinity for the neo-Hookean law at det F <= 0, where P is finite).
 double first_piola_stress(const Model& model, const Mat3& F, Mat3& P);

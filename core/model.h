@@ -57,6 +57,8 @@ struct Model {
     alignas(32) double rest_correction[9][block_width];  // C_i entry k (column-major 3x3) of lane l
     double self_weight[3][block_width];                  // d_i = -sum_j d_j, as NeighborSlot::d
     double volume[block_width];                          // v_i, m^3; 0 in padding lanes
+    double lame_lambda[block_width];                     // particle_lambda of lane l (padding: the matrix's)
+    double lame_mu[block_width];                         // particle_mu of lane l
     int slot_begin = 0, slot_end = 0;                    // its slots in block_slots
   };
   std::vector<ParticleBlock> blocks;      // ceil(n / 4)
@@ -76,9 +78,17 @@ struct Model {
   HexMesh hex;
 
   // Material: the only copy (the scene's material section is not kept).
+  // lame_lambda, lame_mu, density are the matrix (bulk) material's; the particle_ arrays
+  // are each particle's own (MLS: its cell blended by volume fraction over the scene's
+  // material.inclusions, (1.16); hex FEM: the node's lattice cell, used for the masses and
+  // the time-step envelope, while each element carries its own K_e). Homogeneous: all equal
+  // to the matrix's.
   double lame_lambda = 0.0;       // Pa
   double lame_mu = 0.0;           // Pa
   double density = 0.0;           // rho, kg/m^3
+  std::vector<double> particle_lambda;   // n, Pa
+  std::vector<double> particle_mu;       // n, Pa
+  std::vector<double> particle_density;  // n, rho_i, kg/m^3 (m_i = rho_i v_i on lattice and mesh volumes)
   double volume_stiffness = 0.0;  // k_v, Pa
   MaterialLaw law = MaterialLaw::stvk;  // MLS material law (scene material.law)
 
@@ -102,7 +112,7 @@ struct Model {
   double box_volume = 0.0;        // m^3: the scene's box; a mesh body without /body/box: the mesh's volume
   double min_spacing = 0.0;       // smallest nearest-neighbour distance (FEM: element edge), m
   double max_spacing = 0.0;       // largest nearest-neighbour distance (FEM: element edge), m
-  double wave_speed = 0.0;        // p-wave speed sqrt((lambda + 2 mu) / rho), m/s
+  double wave_speed = 0.0;        // fastest p-wave speed present, max_i sqrt((lambda_i + 2 mu_i) / rho_i), m/s
   int64_t mesh_tetrahedra = 0;    // mesh clouds: tetrahedra read (0 otherwise)
   int64_t mesh_unused_nodes = 0;  // mesh clouds: TetGen mid-edge nodes dropped (other unused nodes are refused)
   // Integration constraint sum_i v_i g_ij = 0 at interior particles (MLS only):

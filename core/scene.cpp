@@ -117,12 +117,17 @@ constexpr std::string_view kDistributionKeys[] = {"type",          "per_edge", "
 constexpr std::string_view kMlsKeys[] = {"neighbors",   "max_neighbors", "support_factor", "support_rule",
                                          "integration", "volumes",       "hourglass",      "regularization"};
 constexpr std::string_view kHexFemKeys[] = {"formulation", "volumetric_integration"};
-constexpr std::string_view kMaterialKeys[] = {"young_modulus", "poisson_ratio", "density", "volume_stiffness", "law"};
-// An object element of `fixed` (docs/scene-format.md, "fixed").
+constexpr std::string_view kMaterialKeys[] = {"young_modulus",    "poisson_ratio", "density",
+                                              "volume_stiffness", "law",           "inclusions"};
+// Each element of material.inclusions (a leaf field of scene_field_paths: an array of these).
+constexpr std::string_view kInclusionKeys[] = {"sphere", "box", "young_modulus", "poisson_ratio", "density"};
+constexpr std::string_view kInclusionShapes[] = {"sphere", "box"};
+constexpr std::string_view kSphereKeys[] = {"center", "radius"};
+constexpr std::string_view kInclusionBoxKeys[] = {"min", "max"};
+// An object element of `fixed` (docs/scene-format.md, "fixed"); its sphere and box take
+// kSphereKeys and kInclusionBoxKeys as an inclusion's do.
 constexpr std::string_view kFixedRegionKeys[] = {"group", "plane", "box", "sphere"};
 constexpr std::string_view kFixedPlaneKeys[] = {"point", "normal", "tolerance"};
-constexpr std::string_view kFixedBoxKeys[] = {"min", "max"};
-constexpr std::string_view kFixedSphereKeys[] = {"center", "radius"};
 constexpr std::string_view kIndenterKeys[] = {"radius", "mass", "position", "force", "workspace_min", "workspace_max",
                                               "guide"};
 constexpr std::string_view kContactKeys[] = {"tolerance", "max_iterations"};
@@ -552,6 +557,47 @@ void read_hex_fem(const Reader& r, HexFemSpec& h) {
         "corotational");
 }
 
+// material.inclusions: [{"sphere": {...} | "box": {...}, "young_modulus", "poisson_ratio", "density"?}, ...],
+// the constants in the matrix material's ranges; density defaults to the matrix's.
+void read_inclusions(const Reader& r, MaterialSpec& m) {
+  if (!r.present()) return;
+  m.inclusions.clear();
+  for (const Reader& e : r.elements("an array of inclusions")) {
+    e.object(kInclusionKeys);
+    if (!e.present() || !e["sphere"].present() == !e["box"].present())
+      e.fail("an inclusion needs exactly one shape key (one of: " + join_names(kInclusionShapes) + ")");
+    InclusionSpec inc;
+    inc.density = m.density;
+    if (const Reader sphere = e["sphere"]; sphere.present()) {
+      inc.shape = InclusionShape::sphere;
+      sphere.object(kSphereKeys);
+      if (!sphere["center"].present()) sphere["center"].fail("required: the sphere's centre [x, y, z] in m");
+      if (!sphere["radius"].present()) sphere["radius"].fail("required: the sphere's radius in m");
+      sphere["center"].get(inc.center);
+      sphere["radius"].get(inc.radius, open_closed(0.0, 1e3));
+    } else {
+      const Reader box = e["box"];
+      inc.shape = InclusionShape::box;
+      box.object(kInclusionBoxKeys);
+      if (!box["min"].present()) box["min"].fail("required: the box's lower corner [x, y, z] in m");
+      if (!box["max"].present()) box["max"].fail("required: the box's upper corner [x, y, z] in m");
+      box["min"].get(inc.min);
+      box["max"].get(inc.max);
+      constexpr char kAxis[] = "xyz";
+      for (int a = 0; a < 3; ++a)
+        if (!(inc.max[a] > inc.min[a]))
+          box["max"].fail(std::string("must exceed min in every component (") + kAxis[a] + ": " + fmt(inc.max[a]) +
+                          " <= " + fmt(inc.min[a]) + ")");
+    }
+    if (!e["young_modulus"].present()) e["young_modulus"].fail("required: the inclusion's Young's modulus in Pa");
+    if (!e["poisson_ratio"].present()) e["poisson_ratio"].fail("required: the inclusion's Poisson ratio");
+    e["young_modulus"].get(inc.young_modulus, open_closed(0.0, 1e12));
+    e["poisson_ratio"].get(inc.poisson_ratio, open(-1.0, 0.5));
+    e["density"].get(inc.density, open_closed(0.0, 1e5));
+    m.inclusions.push_back(inc);
+  }
+}
+
 void read_material(const Reader& r, MaterialSpec& m) {
   r.object(kMaterialKeys);
   r["young_modulus"].get(m.young_modulus, open_closed(0.0, 1e12));
@@ -559,6 +605,7 @@ void read_material(const Reader& r, MaterialSpec& m) {
   r["density"].get(m.density, open_closed(0.0, 1e5));
   r["volume_stiffness"].get(m.volume_stiffness, closed(0.0, 1e12));
   r["law"].get(m.law, "material law", kMaterialLaws);
+  read_inclusions(r["inclusions"], m);
 }
 
 // One object element of `fixed`: exactly one of group / plane / box / sphere.
@@ -590,7 +637,7 @@ FixedRegion read_fixed_region(const Reader& e, const std::string& field) {
     p["tolerance"].get(region.tolerance, closed(0.0, 1e3));
   } else if (const Reader b = e["box"]; b.present()) {
     region.kind = FixedRegionKind::box;
-    b.object(kFixedBoxKeys);
+    b.object(kInclusionBoxKeys);
     required(b["min"], "the box's lower corner [x, y, z] in m");
     required(b["max"], "the box's upper corner [x, y, z] in m");
     b["min"].get(region.min);
@@ -599,7 +646,7 @@ FixedRegion read_fixed_region(const Reader& e, const std::string& field) {
   } else {
     const Reader sp = e["sphere"];
     region.kind = FixedRegionKind::sphere;
-    sp.object(kFixedSphereKeys);
+    sp.object(kSphereKeys);
     required(sp["center"], "the sphere's centre [x, y, z] in m");
     required(sp["radius"], "the sphere's radius in m");
     sp["center"].get(region.center);

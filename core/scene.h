@@ -120,12 +120,32 @@ struct HexFemSpec {
   HexVolumetricIntegration volumetric_integration = HexVolumetricIntegration::full;
 };
 
+// A region of other material inside the body (scene material.inclusions): a shape and
+// its elastic constants. Later inclusions override earlier ones where they overlap.
+enum class InclusionShape { sphere, box };
+struct InclusionSpec {
+  InclusionShape shape = InclusionShape::sphere;
+  Vec3 center{0.0, 0.0, 0.0};  // sphere: centre, m
+  double radius = 0.0;         // sphere: radius, m
+  Vec3 min{0.0, 0.0, 0.0};     // box: lower corner, m
+  Vec3 max{0.0, 0.0, 0.0};     // box: upper corner, m
+  double young_modulus = 1.0e4;  // Pa
+  double poisson_ratio = 0.3;
+  double density = 1000.0;       // kg/m^3; the matrix's material.density unless given
+  bool contains(const Vec3& p) const {
+    if (shape == InclusionShape::sphere) return (p - center).squaredNorm() <= radius * radius;
+    return (p.array() >= min.array()).all() && (p.array() <= max.array()).all();
+  }
+  bool operator==(const InclusionSpec&) const = default;
+};
+
 struct MaterialSpec {
   double young_modulus = 1.0e4;   // Pa
   double poisson_ratio = 0.3;
   double density = 1000.0;        // kg/m^3
   double volume_stiffness = 0.0;  // k_v of the volume-restoring term, Pa; 0 = off
   MaterialLaw law = MaterialLaw::stvk;  // MLS: the strain-energy density (mls_forces.h)
+  std::vector<InclusionSpec> inclusions;  // heterogeneity (core/material_field.h); empty: homogeneous
 };
 
 struct IndenterSpec {

@@ -31,9 +31,20 @@ double stability_constant(SolidKind solid, IntegratorType integrator, Distributi
 
 namespace {
 
-// c_p with the volume term: sqrt((lambda + 2 mu + k_v) / rho), m/s.
+// c_p with the volume term: sqrt((lambda + 2 mu + k_v) / rho), m/s, of the fastest material
+// present (a heterogeneous body: the max over the particles' own parameters, so a stiff
+// inclusion shrinks the stable dt).
 double envelope_wave_speed(const Model& model) {
-  return std::sqrt((model.lame_lambda + 2 * model.lame_mu + model.volume_stiffness) / model.density);
+  double c2 = (model.lame_lambda + 2 * model.lame_mu + model.volume_stiffness) / model.density;
+  if (model.particle_lambda.size() == static_cast<size_t>(model.particle_count) &&
+      model.particle_mu.size() == model.particle_lambda.size() &&
+      model.particle_density.size() == model.particle_lambda.size()) {
+    c2 = 0.0;
+    for (int i = 0; i < model.particle_count; ++i)
+      c2 = std::max(c2, (model.particle_lambda[i] + 2 * model.particle_mu[i] + model.volume_stiffness) /
+                            model.particle_density[i]);
+  }
+  return std::sqrt(c2);
 }
 
 double envelope_constant(const Model& model, IntegratorType integrator) {

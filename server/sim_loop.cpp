@@ -69,6 +69,8 @@ CouplingOptions clamp_to_device(CouplingOptions c, const DeviceLimits& device) {
 }
 
 CouplingOptions default_coupling(const Model& model, const Options& opt, const DeviceLimits& device) {
+  // The matrix (bulk) material, what is under the tool, even in a body with stiffer
+  // inclusions (material.inclusions): the coupling is tuned to the surface it touches.
   const double mu = model.lame_mu, lambda = model.lame_lambda;
   const double young = mu * (3.0 * lambda + 2.0 * mu) / (lambda + mu);
   const double poisson = lambda / (2.0 * (lambda + mu));

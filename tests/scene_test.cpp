@@ -292,7 +292,7 @@ TEST(SceneErrors, UnknownTopLevelField) {
 TEST(SceneErrors, UnknownNestedField) {
   const SceneError e = error_of(R"({"material": {"youngs_modulus": 5000}})");
   EXPECT_EQ(e.field(), "/material/youngs_modulus");
-  EXPECT_EQ(e.reason(), "unknown field (known: young_modulus, poisson_ratio, density, volume_stiffness, law)");
+  EXPECT_EQ(e.reason(), "unknown field (known: young_modulus, poisson_ratio, density, volume_stiffness, law, inclusions)");
 
   const SceneError deep = error_of(R"({"verify": {"rest": {"timeout": 5}}})");
   EXPECT_EQ(deep.field(), "/verify/rest/timeout");
