@@ -1,12 +1,13 @@
 #include "core/mls_forces.h"
 
-#include <cassert>
-
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <cassert>
 #include <cstring>
+
+#include "core/neo_hookean.h"
 
 namespace palpate {
 
@@ -39,15 +40,10 @@ inline double linear_stress(const Mat3& F, double lambda, double mu, Mat3& P) {
   return mu * eps.squaredNorm() + 0.5 * lambda * tr * tr;
 }
 
-// Cofactor matrix cof(F) = det(F) F^-T: its columns are the columns of F crossed pairwise
-// (d det F / dF).
-inline Mat3 cofactor(const Mat3& F) {
-  Mat3 C;
-  C.col(0) = F.col(1).cross(F.col(2));
-  C.col(1) = F.col(2).cross(F.col(0));
-  C.col(2) = F.col(0).cross(F.col(1));
-  return C;
-}
+// cof F and the neo-Hookean law (1.13)-(1.15), shared with the neo-Hookean hex FEM.
+using hyperelastic::cofactor;
+using hyperelastic::neo_hookean_differential;
+using hyperelastic::neo_hookean_stress;
 
 inline Mat3 gradient_at(const Model& m, const double* x, int i) {
   const double* D = m.gradient_weight.data();
@@ -137,38 +133,6 @@ inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& 
   W << 0, -w[2], w[1], w[2], 0, -w[0], -w[1], w[0], 0;
   const Mat3 dR = R * W;
   return (2 * mu) * (dF - dR) + (lambda * A.trace()) * R + (lambda * (U.trace() - 3.0)) * dR;
-}
-
-// Compressible neo-Hookean law (1.13): psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2,
-// I1 = tr(F^T F), J = det F; P = mu (F - F^-T) + lambda ln J F^-T (1.14). F^-T = cof F / J.
-// The energy grows without bound as J -> 0+, and is +infinity for J <= 0 (an inverted or
-// flattened particle). No finite stress is right there; the law exerts none (P = 0, and a
-// zero tangent), so nothing is NaN and no energy is released that the health checks never
-// saw put in: they report the inversion (inverted_particle) as for the other laws, and the
-// volume term, when on, is what pushes the particle back.
-// inverse_transpose receives F^-T for the tangent (0 at J <= 0).
-inline double neo_hookean_stress(const Mat3& F, double lambda, double mu, Mat3& P, Mat3& inverse_transpose) {
-  const Mat3 C = cofactor(F);
-  const double J = F.col(0).dot(C.col(0));
-  if (!(J > 0)) {
-    inverse_transpose.setZero();
-    P.setZero();
-    return HUGE_VAL;
-  }
-  const double log_J = std::log(J);
-  inverse_transpose = C / J;
-  P = mu * F + (lambda * log_J - mu) * inverse_transpose;
-  return 0.5 * mu * (F.squaredNorm() - 3.0) - mu * log_J + 0.5 * lambda * log_J * log_J;
-}
-
-// Its differential along dF (1.15), with G = F^-T:
-// dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G  (G : dF = tr(F^-1 dF)).
-// At J <= 0 the law exerts no stress and has no tangent.
-inline Mat3 neo_hookean_differential(const Mat3& F, const Mat3& G, const Mat3& dF, double lambda, double mu) {
-  const double J = F.col(0).dot(cofactor(F).col(0));  // as neo_hookean_stress computes it
-  if (!(J > 0)) return Mat3::Zero();
-  const double log_J = std::log(J);
-  return mu * dF + (mu - lambda * log_J) * (G * dF.transpose() * G) + (lambda * (G.array() * dF.array()).sum()) * G;
 }
 
 // Differential of the volume term's stress k_v (J - 1) cof F along dF:
