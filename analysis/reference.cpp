@@ -55,6 +55,9 @@ Eigen::Vector2d indenter_site(const Scene& scene) {
 }
 
 void check_site(const Scene& scene, const std::string& field) {
+  // A mesh body without a box has no top face to check against: any (x, y) over the body is
+  // a site (build_model refuses a tool that is not above it).
+  if (!scene.box_given) return;
   const Eigen::Vector2d site = indenter_site(scene);
   const double R = scene.indenter.radius;
   const Vec3& lo = scene.box.min;

@@ -267,10 +267,17 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
   }
 
   // Integration constraint at interior particles (consistent_integration.h): measured
-  // always, imposed when the scene asks for it.
-  std::vector<uint8_t> interior = particles_on_faces(X, face_x_min | face_x_max | face_y_min | face_y_max |
-                                                            face_bottom | face_top);
-  for (auto& flag : interior) flag = !flag;
+  // always, imposed when the scene asks for it. Interior: off the body's boundary, i.e. not
+  // a vertex of a mesh's boundary faces (a body of any shape), else off the box faces.
+  std::vector<uint8_t> interior;
+  if (!cloud.boundary_triangles.empty()) {
+    interior.assign(n, 1);
+    for (const auto& t : cloud.boundary_triangles)
+      for (int v : t) interior[v] = 0;
+  } else {
+    interior = particles_on_faces(X, face_x_min | face_x_max | face_y_min | face_y_max | face_bottom | face_top);
+    for (auto& flag : interior) flag = !flag;
+  }
   if (scene.mls.integration == IntegrationRule::consistent) {
     const IntegrationCorrection c = make_integration_consistent(m, interior);
     m.integration_residual_nodal = c.residual_before;

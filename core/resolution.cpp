@@ -23,6 +23,19 @@ Resolution required_resolution(const Scene& scene) {
   out.smallest_depth = hertz::depth(out.smallest_force, R, E_star);                // (6.1)
   out.smallest_contact_radius = hertz::contact_radius(out.smallest_depth, R);       // (6.1)
   out.contact_spacing = out.smallest_contact_radius / kSpacingsPerContactRadius;   // (6.2)
+  for (const InclusionSpec& inc : scene.material.inclusions) {
+    RegionResolution r;
+    if (inc.shape == InclusionShape::sphere) {
+      r.center = inc.center;
+      r.radius = inc.radius;
+      r.spacing = inc.radius / kSpacingsPerInclusionRadius;  // (6.3)
+    } else {  // a box: the ball around it, its smallest half-edge spanned as a sphere's radius
+      r.center = 0.5 * (inc.min + inc.max);
+      r.radius = 0.5 * (inc.max - inc.min).norm();
+      r.spacing = 0.5 * (inc.max - inc.min).minCoeff() / kSpacingsPerInclusionRadius;
+    }
+    out.inclusions.push_back(r);
+  }
   return out;
 }
 

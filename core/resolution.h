@@ -14,6 +14,7 @@ namespace palpate {
 constexpr double kSpacingsPerContactRadius = 3.0;
 constexpr double kSpacingsPerInclusionRadius = 4.0;
 
+// An inclusion's ball (a box's: the ball through its corners) and the spacing inside it.
 struct RegionResolution {
   Vec3 center{0, 0, 0};  // m
   double radius = 0.0;   // m

@@ -163,16 +163,14 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 geo=$work/box.geo
 if [ -n "$dome" ]; then
-  body="Sphere(1) = {0, 0, 0, $dome};
-Box(2) = {-2 * $dome, -2 * $dome, -2 * $dome, 4 * $dome, 4 * $dome, 2 * $dome};
-BooleanDifference(3) = { Volume{1}; Delete; }{ Volume{2}; Delete; };
-eps = 1e-6 * $dome;
+  body="Sphere(1) = {0, 0, 0, $dome, 0, Pi / 2, 2 * Pi};
+eps = 1e-3 * $dome;  // (OpenCASCADE's bounding boxes carry its tolerance: not tighter)
 base() = Surface In BoundingBox{-$dome - eps, -$dome - eps, -eps, $dome + eps, $dome + eps, eps};
-skin() = Abs(Boundary{ Volume{3}; });
+skin() = Abs(Boundary{ Volume{1}; });
 skin() -= base();
 Physical Surface(\"base\", 1) = {base()};
 Physical Surface(\"skin\", 2) = {skin()};
-Physical Volume(\"tissue\", 3) = {3};"
+Physical Volume(\"tissue\", 3) = {1};"
 else
   body="Box(1) = {${box[0]}, ${box[1]}, ${box[2]}, ${box[3]} - (${box[0]}), ${box[4]} - (${box[1]}), ${box[5]} - (${box[2]})};"
 fi
