@@ -12,7 +12,7 @@ namespace palpate {
 
 // Spacings across the smallest contact radius, and across an inclusion's radius.
 constexpr double kSpacingsPerContactRadius = 3.0;
-constexpr double kSpacingsPerInclusionRadius = 4.0;
+constexpr double kSpacingsPerInclusionRadius = 6.0;
 
 // An inclusion's ball (a box's: the ball through its corners) and the spacing inside it.
 struct RegionResolution {

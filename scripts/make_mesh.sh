@@ -34,7 +34,7 @@
 #                       --focus-top grades from the whole skin (r = depth below it)
 #     --scene FILE      size the mesh for a scene (core/resolution.h): the focus size is the
 #                       spacing its smallest sweep force asks for (three spacings across the
-#                       Hertz contact radius), every inclusion gets a --refine with four
+#                       Hertz contact radius), every inclusion gets a --refine with six
 #                       spacings across its radius, and the box and focus are the scene's
 #                       (options after --scene override them). Needs palpate-resolution:
 #                       $PALPATE_BIN (default build/bin) or on PATH. Prints what it chose.

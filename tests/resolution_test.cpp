@@ -59,17 +59,17 @@ TEST(Resolution, AGradedLatticeWithoutFirstSpacingTakesTheRequiredSpacing) {
   }
 }
 
-TEST(Resolution, EveryInclusionIsSpannedByFourSpacings) {
+TEST(Resolution, EveryInclusionIsSpannedBySixSpacings) {
   const Scene s = scene_of(R"({"material": {"inclusions": [
       {"sphere": {"center": [0, 0, -0.5], "radius": 0.25}, "young_modulus": 3e4, "poisson_ratio": 0.3},
       {"box": {"min": [0.2, 0.2, -1], "max": [0.6, 0.3, -0.8]}, "young_modulus": 3e4, "poisson_ratio": 0.3}]}})");
   const Resolution r = required_resolution(s);
   ASSERT_EQ(r.inclusions.size(), 2u);
-  EXPECT_EQ(r.inclusions[0].spacing, 0.25 / 4);
+  EXPECT_EQ(r.inclusions[0].spacing, 0.25 / 6);
   EXPECT_EQ(r.inclusions[0].center, Vec3(0, 0, -0.5));
-  EXPECT_NEAR(r.inclusions[1].spacing, 0.05 / 4, 1e-15);  // the smallest half-edge, 0.05 m
+  EXPECT_NEAR(r.inclusions[1].spacing, 0.05 / 6, 1e-15);  // the smallest half-edge, 0.05 m
   EXPECT_NEAR(r.inclusions[1].radius, 0.5 * std::sqrt(0.16 + 0.01 + 0.04), 1e-15);
-  EXPECT_NEAR(r.finest_spacing(), 0.0125, 1e-15);  // finer than the contact's 0.0236 m
+  EXPECT_NEAR(r.finest_spacing(), 0.05 / 6, 1e-15);  // finer than the contact's 0.0236 m
 }
 
 TEST(Resolution, ASceneWhoseMeshIsStillToBeMadeCanBeReadForItsDescription) {

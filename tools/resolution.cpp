@@ -18,7 +18,7 @@ using namespace palpate;
 
 const char* kUsage = R"(usage: palpate-resolution --scene FILE [options]
 Prints the particle spacing the scene's tool, force sweep and inclusions ask for: three
-spacings across the smallest Hertz contact radius of verify.forces, four across the
+spacings across the smallest Hertz contact radius of verify.forces, six across the
 radius of every inclusion. The scene's mesh or node file need not exist yet.
   --scene FILE      scene file (JSON)
   --set KEY=VALUE   override a scene field by its dotted path (repeatable)
