@@ -6,6 +6,7 @@
 // each repetition), so every repetition does the same work; the figures are the
 // medians over the repetitions (std::chrono::steady_clock).
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -44,7 +45,8 @@ integrator with the indenter pressed into the body; prints medians.
                     steps (default 300)
   --ie-repeats N    repetitions of the implicit-Euler step (default 10)
   --ie-dt SECONDS   time step of the implicit-Euler step (default 0.01)
-  --press-force N   force pressing the indenter in before timing (default 150)
+  --press-force N   force pressing the indenter in before timing (default: the
+                    largest force of the scene's verify.forces, 327.6 N for hertz_cube)
   --press-steps N   RK4 steps of pressing in (default 300), then more (up to 20x)
                     until at least --min-contacts particles are in contact
   --min-contacts N  (default 4)
@@ -63,7 +65,7 @@ int main(int argc, char** argv) {
   std::filesystem::path scene_file = std::filesystem::path(PALPATE_SOURCE_DIR) / "scenes" / "hertz_cube.json";
   SceneOverrides overrides;
   int repeats = 300, ie_repeats = 10, press_steps = 300, min_contacts = 4;
-  double ie_dt = 0.01, press_force = 150.0;
+  double ie_dt = 0.01, press_force = NAN;  // NAN: the scene's largest verification force
   bool json_out = false;
   try {
     for (cli::Arguments args(argc, argv); args.next();) {
@@ -99,13 +101,18 @@ int main(int argc, char** argv) {
   const int nnz = is_mls && !model.neighbor_offset.empty() ? model.neighbor_offset.back() : 0;
 
   // One set of options per integrator (the scene's dt and damping; implicit Euler at --ie-dt).
-  Options rk4_opt = scene_options, se_opt = scene_options, ie_opt = scene_options;
+  // The tool on the vertical guide: pressed free on a curved body (a dome) it slides off.
+  Options held = scene_options;
+  held.tool_guide = ToolGuide::vertical;
+  Options rk4_opt = held, se_opt = held, ie_opt = held;
   rk4_opt.integrator.type = IntegratorType::rk4;
   se_opt.integrator.type = IntegratorType::symplectic_euler;
   ie_opt.integrator.type = IntegratorType::implicit_euler;
   ie_opt.integrator.dt = ie_dt;
 
   // Press the indenter in with RK4 until it touches.
+  if (std::isnan(press_force))
+    press_force = *std::max_element(loaded->scene.verify.forces.begin(), loaded->scene.verify.forces.end());
   State pressed = make_state(model, rk4_opt);
   pressed.force_command = press_down(press_force);
   int pressing = 0;
