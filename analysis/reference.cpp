@@ -120,7 +120,9 @@ std::string reference_key(const Scene& scene) {
     << " nu=" << scene.material.poisson_ratio;
   // A heterogeneous body is another problem (a homogeneous body's key is unchanged).
   for (const InclusionSpec& inc : scene.material.inclusions) {
-    if (inc.shape == InclusionShape::sphere)
+    if (inc.shape == InclusionShape::group)
+      o << " group=" << inc.group;
+    else if (inc.shape == InclusionShape::sphere)
       o << " sphere=" << vec_text(inc.center) << inc.radius;
     else
       o << " inclusion_box=" << vec_text(inc.min) << vec_text(inc.max);

@@ -129,6 +129,7 @@ void set_particle_materials(Model& m, const Scene& scene, const NodeCloud& cloud
   else
     cube_cells(m.rest_position, m.volume, cell_min, cell_max);
   MaterialField field = material_field(scene.material, cell_min, cell_max);
+  blend_group_inclusions(scene.material, cloud, scene.source, field);
   m.particle_lambda = std::move(field.lambda);
   m.particle_mu = std::move(field.mu);
   m.particle_density = std::move(field.density);

@@ -1,5 +1,7 @@
 #include "core/material_field.h"
 
+#include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 namespace palpate {
@@ -77,6 +79,58 @@ MaterialField material_field(const MaterialSpec& material, const Points& cell_mi
     f.inclusion_fraction[i] = c.inclusion_fraction;
   }
   return f;
+}
+
+void blend_group_inclusions(const MaterialSpec& material, const NodeCloud& cloud, const std::string& source,
+                            MaterialField& field) {
+  for (size_t k = 0; k < material.inclusions.size(); ++k) {
+    const InclusionSpec& inc = material.inclusions[k];
+    if (inc.shape != InclusionShape::group) continue;
+    const std::string where = "/material/inclusions/" + std::to_string(k) + "/group";
+    if (cloud.tetrahedra.empty())
+      throw SceneError(source, where,
+                       "a group names a physical volume of a tetrahedral mesh; this body is not a mesh (use a sphere "
+                       "or a box)");
+    int64_t tag = 0;
+    bool found = false;
+    std::string names;
+    for (const NodeCloud::VolumeGroup& g : cloud.volume_groups) {
+      if (g.name == inc.group) tag = g.tag, found = true;
+      names += (names.empty() ? "'" : ", '") + g.name + "'";
+    }
+    if (!found)
+      throw SceneError(source, where,
+                       "the mesh has no physical volume group named '" + inc.group + "' (it has: " +
+                           (names.empty() ? std::string("none") : names) + ")");
+    // f_i from the lumped tetrahedra (the quarter of each V_t its four vertices share).
+    const int n = static_cast<int>(cloud.positions.cols());
+    std::vector<double> in_group(n, 0.0), total(n, 0.0);
+    for (size_t t = 0; t < cloud.tetrahedra.size(); ++t) {
+      const auto& v = cloud.tetrahedra[t];
+      const Vec3 a = cloud.positions.col(v[0]);
+      const double quarter =
+          std::abs((cloud.positions.col(v[1]) - a).dot((cloud.positions.col(v[2]) - a).cross(cloud.positions.col(v[3]) - a))) /
+          24.0;
+      for (int c = 0; c < 4; ++c) {
+        total[v[c]] += quarter;
+        if (cloud.tetrahedron_region[t] == tag) in_group[v[c]] += quarter;
+      }
+    }
+    const LameParameters lame = lame_parameters(inc.young_modulus, inc.poisson_ratio);
+    for (int i = 0; i < n; ++i) {
+      if (in_group[i] == 0.0) continue;
+      if (in_group[i] == total[i]) {  // wholly inside: exactly the group's (1.16)
+        field.lambda[i] = lame.lambda, field.mu[i] = lame.mu, field.density[i] = inc.density;
+        field.inclusion_fraction[i] = 1.0;
+        continue;
+      }
+      const double f = in_group[i] / total[i];
+      field.lambda[i] = (1 - f) * field.lambda[i] + f * lame.lambda;
+      field.mu[i] = (1 - f) * field.mu[i] + f * lame.mu;
+      field.density[i] = (1 - f) * field.density[i] + f * inc.density;
+      field.inclusion_fraction[i] = std::max(field.inclusion_fraction[i], f);
+    }
+  }
 }
 
 void lattice_cells(const Points& X, const Eigen::Vector3i& per_axis, Points& cell_min, Points& cell_max) {

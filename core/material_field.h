@@ -3,8 +3,10 @@
 // particle's (hex FEM: each element's) share of every inclusion, sampled on a
 // 4 x 4 x 4 midpoint grid of its cell, and the Lame parameters and density blended
 // by volume fraction (Voigt, docs/physics.md (1.16)). A pipeline stage of build_model.
+#include <string>
 #include <vector>
 
+#include "core/node_cloud.h"
 #include "core/scene.h"
 #include "core/types.h"
 
@@ -36,6 +38,17 @@ struct MaterialField {
   std::vector<double> lambda, mu, density, inclusion_fraction;  // n each
 };
 MaterialField material_field(const MaterialSpec& material, const Points& cell_min, const Points& cell_max);
+
+// The group inclusions (shape "group": a physical volume of a tetrahedral mesh), blended
+// into `field` after the shapes, in their order: particle i's share of the group is
+// f_i = sum over its tetrahedra t in the group of |V_t| / 4, divided by v_i = sum over all its
+// tetrahedra of |V_t| / 4 (the lumped volumes of the mesh, mesh_reader.h), and each of
+// lambda, mu, rho becomes (1 - f_i) x (what it was) + f_i x the group's (1.16). A particle
+// whose tetrahedra all lie in the group gets exactly its parameters. Throws SceneError at
+// /material/inclusions/<k>/group for a cloud without tetrahedra or a name the mesh does
+// not have (listing those it has).
+void blend_group_inclusions(const MaterialSpec& material, const NodeCloud& cloud, const std::string& source,
+                            MaterialField& field);
 
 // The cell of each lattice node: along each axis from the midpoint to the previous node to
 // the midpoint to the next (the box's face at the ends), the cell whose volume is the

@@ -458,6 +458,27 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
   mesh.tetrahedron_region = raw.tet_region;
   mesh.tetrahedron_region.resize(raw.tets.size(), 0);
   mesh.boundary_faces = boundary_faces(mesh.positions, mesh.tetrahedra);
+  // The boundary must enclose what the tetrahedra hold (divergence theorem: sum over the
+  // outward faces of (x . n) A / 3): tetrahedra that interpenetrate without sharing a face,
+  // or fold over one another, hold more volume than their boundary encloses.
+  {
+    const Vec3 origin = mesh.positions.col(0);
+    const double L = (mesh.positions.rowwise().maxCoeff() - mesh.positions.rowwise().minCoeff()).norm();
+    double enclosed = 0;
+    for (const auto& f : mesh.boundary_faces) {
+      const Vec3 a = mesh.positions.col(f[0]) - origin, b = mesh.positions.col(f[1]) - origin,
+                 c = mesh.positions.col(f[2]) - origin;
+      enclosed += (a + b + c).dot((b - a).cross(c - a)) / 18.0;
+    }
+    const double round_off = 1e-12 * static_cast<double>(mesh.boundary_faces.size()) * L * L * L;
+    if (!(std::abs(enclosed - mesh.total_volume) <= 1e-6 * mesh.total_volume + round_off)) {
+      std::ostringstream o;
+      o << element_file << ": the tetrahedra overlap: they hold " << mesh.total_volume
+        << " m^3 but their boundary encloses " << enclosed
+        << " m^3 (tetrahedra that interpenetrate or fold over one another without sharing faces)";
+      throw std::runtime_error(o.str());
+    }
+  }
 
   // Physical surface groups: the kept nodes of their triangles (every triangle node is a
   // tetrahedron's node: the unused-node check above refused the others).

@@ -66,6 +66,8 @@ NodeCloud mesh_cloud(const TetMesh& mesh) {
   cloud.tetrahedra = mesh.tetrahedra;
   cloud.tetrahedron_region = mesh.tetrahedron_region;
   for (const SurfaceGroup& g : mesh.surface_groups) cloud.surface_node_sets.push_back({g.name, g.tag, g.nodes});
+  for (const PhysicalName& p : mesh.physical_names)
+    if (p.dimension == 3) cloud.volume_groups.push_back({p.name, p.tag});
   cloud.boundary_triangles = mesh.boundary_faces;
   return cloud;
 }

@@ -28,6 +28,11 @@ struct NodeCloud {
     std::vector<int> nodes;  // particle indices, ascending
   };
   std::vector<NodeSet> surface_node_sets;            // the mesh's physical surface groups
+  struct VolumeGroup {
+    std::string name;  // the gmsh physical volume name
+    int64_t tag = 0;   // its tag in tetrahedron_region
+  };
+  std::vector<VolumeGroup> volume_groups;            // the mesh's named physical volumes ($PhysicalNames)
   std::vector<std::array<int, 3>> boundary_triangles;  // the mesh's boundary faces, outward (mesh_reader.h)
 };
 

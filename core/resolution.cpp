@@ -24,6 +24,7 @@ Resolution required_resolution(const Scene& scene) {
   out.smallest_contact_radius = hertz::contact_radius(out.smallest_depth, R);       // (6.1)
   out.contact_spacing = out.smallest_contact_radius / kSpacingsPerContactRadius;   // (6.2)
   for (const InclusionSpec& inc : scene.material.inclusions) {
+    if (inc.shape == InclusionShape::group) continue;  // a mesh's own region: the mesh resolves it already
     RegionResolution r;
     if (inc.shape == InclusionShape::sphere) {
       r.center = inc.center;

@@ -120,8 +120,8 @@ constexpr std::string_view kHexFemKeys[] = {"formulation", "volumetric_integrati
 constexpr std::string_view kMaterialKeys[] = {"young_modulus",    "poisson_ratio", "density",
                                               "volume_stiffness", "law",           "inclusions"};
 // Each element of material.inclusions (a leaf field of scene_field_paths: an array of these).
-constexpr std::string_view kInclusionKeys[] = {"sphere", "box", "young_modulus", "poisson_ratio", "density"};
-constexpr std::string_view kInclusionShapes[] = {"sphere", "box"};
+constexpr std::string_view kInclusionKeys[] = {"sphere", "box", "group", "young_modulus", "poisson_ratio", "density"};
+constexpr std::string_view kInclusionShapes[] = {"sphere", "box", "group"};
 constexpr std::string_view kSphereKeys[] = {"center", "radius"};
 constexpr std::string_view kInclusionBoxKeys[] = {"min", "max"};
 // An object element of `fixed` (docs/scene-format.md, "fixed"); its sphere and box take
@@ -564,11 +564,17 @@ void read_inclusions(const Reader& r, MaterialSpec& m) {
   m.inclusions.clear();
   for (const Reader& e : r.elements("an array of inclusions")) {
     e.object(kInclusionKeys);
-    if (!e.present() || !e["sphere"].present() == !e["box"].present())
+    int shapes = 0;
+    for (std::string_view k : kInclusionShapes) shapes += e[k].present();
+    if (!e.present() || shapes != 1)
       e.fail("an inclusion needs exactly one shape key (one of: " + join_names(kInclusionShapes) + ")");
     InclusionSpec inc;
     inc.density = m.density;
-    if (const Reader sphere = e["sphere"]; sphere.present()) {
+    if (const Reader group = e["group"]; group.present()) {
+      inc.shape = InclusionShape::group;
+      group.get(inc.group);
+      if (inc.group.empty()) group.fail("the name of a physical volume group of the mesh, not empty");
+    } else if (const Reader sphere = e["sphere"]; sphere.present()) {
       inc.shape = InclusionShape::sphere;
       sphere.object(kSphereKeys);
       if (!sphere["center"].present()) sphere["center"].fail("required: the sphere's centre [x, y, z] in m");
@@ -760,6 +766,12 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
       s.distribution.type != DistributionType::graded_grid)
     r["body"]["distribution"]["type"].fail("the hex_fem model meshes a lattice: use a 'grid' or 'graded_grid' distribution");
   read_material(r["material"], s.material);
+  if (s.model == "hex_fem")
+    for (size_t k = 0; k < s.material.inclusions.size(); ++k)
+      if (s.material.inclusions[k].shape == InclusionShape::group)
+        r["material"]["inclusions"].elements("an array of inclusions")[k]["group"].fail(
+            "a group names a physical volume of a tetrahedral mesh; the hex_fem model meshes a lattice (use a "
+            "sphere or a box)");
   if (s.model == "hex_fem" && s.material.law != MaterialLaw::stvk)
     r["material"]["law"].fail("applies to the mls model; the hex_fem model's law is hex_fem.formulation");
   read_fixed(r["fixed"], s.fixed_faces, s.fixed_regions);

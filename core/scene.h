@@ -121,10 +121,12 @@ struct HexFemSpec {
 };
 
 // A region of other material inside the body (scene material.inclusions): a shape and
-// its elastic constants. Later inclusions override earlier ones where they overlap.
-enum class InclusionShape { sphere, box };
+// its elastic constants. Later inclusions override earlier ones where they overlap; a
+// `group` (a mesh's physical volume, applied after the shapes) overrides the shapes.
+enum class InclusionShape { sphere, box, group };
 struct InclusionSpec {
   InclusionShape shape = InclusionShape::sphere;
+  std::string group;           // group: the name of a physical volume group of the mesh
   Vec3 center{0.0, 0.0, 0.0};  // sphere: centre, m
   double radius = 0.0;         // sphere: radius, m
   Vec3 min{0.0, 0.0, 0.0};     // box: lower corner, m
@@ -132,7 +134,10 @@ struct InclusionSpec {
   double young_modulus = 1.0e4;  // Pa
   double poisson_ratio = 0.3;
   double density = 1000.0;       // kg/m^3; the matrix's material.density unless given
+  // Whether the point lies in a sphere or box (a group is a set of tetrahedra, not a shape:
+  // material_field.h blends it from the mesh).
   bool contains(const Vec3& p) const {
+    if (shape == InclusionShape::group) return false;
     if (shape == InclusionShape::sphere) return (p - center).squaredNorm() <= radius * radius;
     return (p.array() >= min.array()).all() && (p.array() <= max.array()).all();
   }

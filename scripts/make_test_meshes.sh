@@ -7,3 +7,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 command -v gmsh >/dev/null || { echo "gmsh is missing: apt-get install -y gmsh" >&2; exit 1; }
 gmsh -3 -order 1 tests/data/dome.geo -o tests/data/dome.msh
+#   tests/data/lump_block.msh: a 10 x 10 x 5 cm block with a conformally meshed spherical lump,
+#   physical volumes "matrix" and "lump" (tests/material_field_test.cpp).
+gmsh -3 -order 1 tests/data/lump_block.geo -o tests/data/lump_block.msh

@@ -5,12 +5,15 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <filesystem>
+#include <functional>
 #include <random>
 #include <string>
 
 #include "analysis/reference.h"
 #include "core/hex_fem.h"
 #include "core/material_field.h"
+#include "core/mesh_reader.h"
 #include "core/mls_forces.h"
 #include "core/model.h"
 #include "core/scene.h"
@@ -389,6 +392,96 @@ TEST(HeterogeneousEnvelope, TenTimesStifferInclusionShrinksDtBySqrtTen) {
     EXPECT_NEAR(ratio, std::sqrt(10.0), 1e-12);
   }
   EXPECT_NEAR(stiff.wave_speed / plain.wave_speed, std::sqrt(10.0), 1e-12);
+}
+
+// A physical volume of the mesh as an inclusion (shape "group"): tests/data/lump_block.msh,
+// a block with a conformally meshed lump. Truths from the mesh file itself: a node all of
+// whose tetrahedra are in the lump has exactly the lump's parameters, one with none exactly
+// the matrix's, and the blended shares add up to the lump's volume, sum_i f_i v_i = sum of
+// |V_t| over the lump's tetrahedra (the lumping conserves volume).
+const std::filesystem::path kLumpBlock = PALPATE_SOURCE_DIR "/tests/data/lump_block.msh";
+Scene lump_block_scene(const std::string& inclusions, const std::string& model = "mls") {
+  return parse_scene(R"({"model": ")" + model + R"(", "body": {"distribution": {"type": "mesh", "file": "lump_block.msh"}},
+                        "mls": {"volumes": "mesh", "neighbors": 20, "support_rule": "kth_distance", "support_factor": 1.1},
+                        "material": {"young_modulus": 2e4, "poisson_ratio": 0.3, "inclusions": )" + inclusions + R"(},
+                        "fixed": ["bottom"], "indenter": {"radius": 0.01}, "integrator": {"dt": 1e-4}})",
+                     "inline.json", PALPATE_SOURCE_DIR "/tests/data");
+}
+
+TEST(GroupInclusion, AMeshVolumeGroupIsBlendedFromItsTetrahedra) {
+  const Model m = build_model(
+      lump_block_scene(R"([{"group": "lump", "young_modulus": 8e4, "poisson_ratio": 0.45, "density": 2000}])"));
+  const TetMesh mesh = read_mesh(kLumpBlock);
+  const int64_t lump = physical_group_tag(mesh, kLumpBlock, 3, "lump");
+  const LameParameters matrix = lame_parameters(2e4, 0.3), stiff = lame_parameters(8e4, 0.45);
+  std::vector<int> in(m.particle_count, 0), all(m.particle_count, 0);
+  double lump_volume = 0;
+  for (size_t t = 0; t < mesh.tetrahedra.size(); ++t) {
+    const auto& v = mesh.tetrahedra[t];
+    const bool is_lump = mesh.tetrahedron_region[t] == lump;
+    if (is_lump)
+      lump_volume += std::abs((mesh.positions.col(v[1]) - mesh.positions.col(v[0]))
+                                  .dot((mesh.positions.col(v[2]) - mesh.positions.col(v[0]))
+                                           .cross(mesh.positions.col(v[3]) - mesh.positions.col(v[0])))) / 6;
+    for (int c = 0; c < 4; ++c) all[v[c]]++, in[v[c]] += is_lump;
+  }
+  int inside = 0, outside = 0, rim = 0;
+  double shares = 0;
+  for (int i = 0; i < m.particle_count; ++i) {
+    if (in[i] == all[i]) {
+      ++inside;
+      EXPECT_EQ(m.particle_mu[i], stiff.mu);
+      EXPECT_EQ(m.particle_lambda[i], stiff.lambda);
+      EXPECT_EQ(m.particle_density[i], 2000.0);
+    } else if (in[i] == 0) {
+      ++outside;
+      EXPECT_EQ(m.particle_mu[i], matrix.mu);
+    } else {
+      ++rim;
+      EXPECT_GT(m.particle_mu[i], matrix.mu);
+      EXPECT_LT(m.particle_mu[i], stiff.mu);
+    }
+    shares += (m.particle_mu[i] - matrix.mu) / (stiff.mu - matrix.mu) * m.volume[i];
+  }
+  EXPECT_GT(inside, 5);
+  EXPECT_GT(rim, 20);
+  EXPECT_GT(outside, 300);
+  EXPECT_NEAR(shares, lump_volume, 1e-12 * lump_volume);
+  // The meshed ball (r = 1 cm) lies inside the true one by the chords of its 3 mm facets.
+  EXPECT_LT(lump_volume, 4.0 / 3.0 * M_PI * 1e-6);
+  EXPECT_GT(lump_volume, 0.9 * 4.0 / 3.0 * M_PI * 1e-6);
+  // The stiffest material sets the wave speed.
+  EXPECT_NEAR(m.wave_speed, std::sqrt((stiff.lambda + 2 * stiff.mu) / 2000.0), 1e-9);
+}
+
+TEST(GroupInclusion, MistakesNameTheInclusion) {
+  auto message = [](const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const SceneError& e) {
+      return e.field() + ": " + e.reason();
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(message([] { build_model(lump_block_scene(R"([{"group": "lmup", "young_modulus": 8e4, "poisson_ratio": 0.3}])")); }),
+            "/material/inclusions/0/group: the mesh has no physical volume group named 'lmup' (it has: 'matrix', 'lump')");
+  EXPECT_EQ(message([] {
+              build_model(parse_scene(
+                  cube_scene(R"(, "inclusions": [{"group": "lump", "young_modulus": 8e4, "poisson_ratio": 0.3}])"),
+                  "inline.json", "."));
+            }),
+            "/material/inclusions/0/group: a group names a physical volume of a tetrahedral mesh; this body is not a "
+            "mesh (use a sphere or a box)");
+  EXPECT_NE(message([] {
+              parse_scene(R"({"model": "hex_fem", "material": {"inclusions": [{"group": "lump", "young_modulus": 8e4,
+                             "poisson_ratio": 0.3}]}})", "inline.json", ".");
+            }).find("/material/inclusions/0/group: a group names a physical volume"),
+            std::string::npos);
+  EXPECT_NE(message([] {
+              parse_scene(cube_scene(R"(, "inclusions": [{"group": "lump", "sphere": {"center": [0, 0, 0], "radius": 1},
+                             "young_modulus": 8e4, "poisson_ratio": 0.3}])"), "inline.json", ".");
+            }).find("exactly one shape key"),
+            std::string::npos);
 }
 
 }  // namespace

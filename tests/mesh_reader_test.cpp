@@ -195,6 +195,17 @@ TEST_F(MeshFiles, Gmsh41KeepsTheTetrahedra) {
   EXPECT_EQ(m.positions.col(7), Vec3(1, 1, 1));
 }
 
+// Six positive tetrahedra of the unit cube with one corner moved (a fuzzer's find): no face
+// is shared by more than two of them, one body, but two of them interpenetrate, so they
+// hold more volume than their boundary encloses (the divergence theorem), and are refused.
+TEST_F(MeshFiles, InterpenetratingTetrahedraAreRefused) {
+  const std::string node = "8 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 1 1 0\n5 0 0 1\n6 1 0 1\n7 0 1 1\n8 1 1 1\n";
+  const std::string ele = "6 4 0\n1 1 4 2 8\n2 1 2 6 8\n3 1 3 4 8\n4 2 6 3 8\n5 1 6 5 8\n6 1 5 7 8\n";
+  const std::string e = error_of("o.node", node, ele);
+  EXPECT_NE(e.find((dir_ / "o.ele").string() + ": the tetrahedra overlap: they hold"), std::string::npos) << e;
+  EXPECT_NE(e.find("but their boundary encloses"), std::string::npos) << e;
+}
+
 TEST_F(MeshFiles, Gmsh22GivesTheSameMesh) {
   const TetMesh a = read_gmsh(write("a.msh", kGmsh41));
   const TetMesh b = read_gmsh(write("b.msh", kGmsh22));
