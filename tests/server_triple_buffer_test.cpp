@@ -118,14 +118,19 @@ TEST(TripleBuffer, HandlesMoveWithTheirEnd) {
 
 // A writer thread publishing sequence-numbered frames as fast as it can, a reader
 // thread taking as fast as it can: the reader's frames only get newer, each is whole,
-// and the last one it sees is the last one published.
+// and the last one it sees is the last one published. Halfway the writer waits until the
+// reader has taken a frame, so the two really overlap however the threads are scheduled
+// (on a loaded machine the writer could otherwise finish before the reader starts).
 TEST(TripleBuffer, TwoThreadsNeverSeeAnOlderOrATornFrame) {
   constexpr uint64_t kFrames = 200000;
   Buffer b;
   std::atomic<bool> done{false};
+  std::atomic<uint64_t> taken_so_far{0};
   uint64_t replaced = 0;
   std::thread writer([&] {
     for (uint64_t s = 1; s <= kFrames; ++s) {
+      if (s == kFrames / 2)
+        while (taken_so_far.load(std::memory_order_acquire) == 0) std::this_thread::yield();
       b.writer.back().fill(s);
       if (b.writer.publish()) ++replaced;
     }
@@ -137,6 +142,7 @@ TEST(TripleBuffer, TwoThreadsNeverSeeAnOlderOrATornFrame) {
     while (b.reader.take()) {
       const Frame& f = b.reader.front();
       ++taken;
+      taken_so_far.store(taken, std::memory_order_release);
       if (!f.whole()) ++torn;
       if (f.seq <= last) ++older;
       last = f.seq;
