@@ -229,7 +229,7 @@ struct Scene {
   HexFemSpec hex_fem;
   MaterialSpec material;
   uint32_t fixed_faces = face_bottom | faces_sides;
-  std::vector<FixedRegion> fixed_regions;  // the object elements of `fixed` (file scenes only: the wire has faces)
+  std::vector<FixedRegion> fixed_regions;  // the object elements of `fixed` (the wire's Scene.fixedRegions)
   IndenterSpec indenter;
   ContactSpec contact;
   IntegratorSpec integrator;

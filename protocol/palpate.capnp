@@ -124,6 +124,40 @@ struct Material {
   density @2 :Float64 = 1000;                                        # kg/m^3, (0, 1e5]
   volumeStiffness @3 :Float64 = 0 $Json.name("volume_stiffness");   # Pa, [0, 1e12]
   law @4 :MaterialLaw = stvk;                                        # the MLS strain-energy density
+  inclusions @5 :List(Inclusion);                                    # null = homogeneous
+}
+# A region of another material (docs/scene-format.md, material.inclusions): one shape,
+# and its material. Sent to the reader as the file's {"sphere": {...}, "young_modulus": ...}.
+struct Inclusion {
+  union {
+    sphere @0 :Sphere;
+    box @1 :Box;                 # both corners required
+    group @2 :Text;              # a physical volume group of the mesh body, by name
+  }
+  youngModulus @3 :Float64 $Json.name("young_modulus");  # Pa, (0, 1e12]; required
+  poissonRatio @4 :Float64 $Json.name("poisson_ratio");  # (-1, 0.5); required
+  density @5 :Float64;           # kg/m^3, (0, 1e5]; 0 = the matrix's material.density
+}
+struct Sphere {
+  center @0 :List(Float64);      # [x, y, z], m; required
+  radius @1 :Float64;            # m, > 0
+}
+struct Plane {
+  point @0 :List(Float64);       # [x, y, z], m, a point of the plane; required
+  normal @1 :List(Float64);      # [x, y, z], any length > 0; required
+  tolerance @2 :Float64 = 1e-9;  # m, [0, 1e3]: the nodes this close to the plane are fixed
+}
+# A fixed region besides the faces (docs/scene-format.md, "fixed"): the nodes of a mesh
+# group or inside a geometric selector. The file has one list, `fixed`, of face names and
+# region objects; on the wire the regions are Scene.fixedRegions, and the reader sees
+# `fixed` = the faces followed by the regions (messages number them so).
+struct FixedRegion {
+  union {
+    group @0 :Text;              # a physical surface group of the mesh body (its nodes)
+    plane @1 :Plane;
+    box @2 :Box;                 # closed; both corners required
+    sphere @3 :Sphere;           # closed
+  }
 }
 enum MaterialLaw {
   stvk @0;                       # St Venant-Kirchhoff (the paper's)
@@ -183,6 +217,8 @@ struct Scene {
   gravity @10 :List(Float64);        # [x, y, z] m/s^2; null = [0, 0, 0]; norm <= 1000
   verify @11 :Verify;
   health @12 :Health;
+  fixedRegions @13 :List(FixedRegion) $Json.name("fixed_regions");
+                                     # null = none; non-empty needs `fixed` set (empty for regions only)
 }
 
 # ---------------------------------------------------------------------------
