@@ -107,8 +107,9 @@ void build_force_blocks(Model& m) {
 
 // Material (Lame parameters from E, nu).
 void set_material(Model& m, const MaterialSpec& mat) {
-  m.lame_lambda = mat.young_modulus * mat.poisson_ratio / ((1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio));
-  m.lame_mu = mat.young_modulus / (2 * (1 + mat.poisson_ratio));
+  const LameParameters lame = lame_parameters(mat.young_modulus, mat.poisson_ratio);
+  m.lame_lambda = lame.lambda;
+  m.lame_mu = lame.mu;
   m.volume_stiffness = mat.volume_stiffness;
   m.law = mat.law;
   m.density = mat.density;

@@ -557,6 +557,30 @@ void read_hex_fem(const Reader& r, HexFemSpec& h) {
         "corotational");
 }
 
+// {"center": [x, y, z], "radius": r}: a ball, m (an inclusion's, a fixed region's).
+void read_sphere(const Reader& r, Vec3& center, double& radius) {
+  r.object(kSphereKeys);
+  if (!r["center"].present()) r["center"].fail("required: the sphere's centre [x, y, z] in m");
+  if (!r["radius"].present()) r["radius"].fail("required: the sphere's radius in m");
+  r["center"].get(center);
+  r["radius"].get(radius, open_closed(0.0, 1e3));
+}
+
+// {"min": [x, y, z], "max": [x, y, z]}: a box, m. `solid`: max > min in every component (a
+// region of material has volume); else max >= min (a fixed slab may be flat).
+void read_box_corners(const Reader& r, Vec3& min, Vec3& max, bool solid) {
+  r.object(kInclusionBoxKeys);
+  if (!r["min"].present()) r["min"].fail("required: the box's lower corner [x, y, z] in m");
+  if (!r["max"].present()) r["max"].fail("required: the box's upper corner [x, y, z] in m");
+  r["min"].get(min);
+  r["max"].get(max);
+  constexpr char kAxis[] = "xyz";
+  for (int a = 0; a < 3; ++a)
+    if (solid ? !(max[a] > min[a]) : !(max[a] >= min[a]))
+      r["max"].fail(std::string(solid ? "must exceed min in every component (" : "must be at least min in every component (") +
+                    kAxis[a] + ": " + fmt(max[a]) + (solid ? " <= " : " < ") + fmt(min[a]) + ")");
+}
+
 // material.inclusions: [{"sphere": {...} | "box": {...}, "young_modulus", "poisson_ratio", "density"?}, ...],
 // the constants in the matrix material's ranges; density defaults to the matrix's.
 void read_inclusions(const Reader& r, MaterialSpec& m) {
@@ -576,24 +600,10 @@ void read_inclusions(const Reader& r, MaterialSpec& m) {
       if (inc.group.empty()) group.fail("the name of a physical volume group of the mesh, not empty");
     } else if (const Reader sphere = e["sphere"]; sphere.present()) {
       inc.shape = InclusionShape::sphere;
-      sphere.object(kSphereKeys);
-      if (!sphere["center"].present()) sphere["center"].fail("required: the sphere's centre [x, y, z] in m");
-      if (!sphere["radius"].present()) sphere["radius"].fail("required: the sphere's radius in m");
-      sphere["center"].get(inc.center);
-      sphere["radius"].get(inc.radius, open_closed(0.0, 1e3));
+      read_sphere(sphere, inc.center, inc.radius);
     } else {
-      const Reader box = e["box"];
       inc.shape = InclusionShape::box;
-      box.object(kInclusionBoxKeys);
-      if (!box["min"].present()) box["min"].fail("required: the box's lower corner [x, y, z] in m");
-      if (!box["max"].present()) box["max"].fail("required: the box's upper corner [x, y, z] in m");
-      box["min"].get(inc.min);
-      box["max"].get(inc.max);
-      constexpr char kAxis[] = "xyz";
-      for (int a = 0; a < 3; ++a)
-        if (!(inc.max[a] > inc.min[a]))
-          box["max"].fail(std::string("must exceed min in every component (") + kAxis[a] + ": " + fmt(inc.max[a]) +
-                          " <= " + fmt(inc.min[a]) + ")");
+      read_box_corners(e["box"], inc.min, inc.max, /*solid=*/true);
     }
     if (!e["young_modulus"].present()) e["young_modulus"].fail("required: the inclusion's Young's modulus in Pa");
     if (!e["poisson_ratio"].present()) e["poisson_ratio"].fail("required: the inclusion's Poisson ratio");
@@ -643,20 +653,10 @@ FixedRegion read_fixed_region(const Reader& e, const std::string& field) {
     p["tolerance"].get(region.tolerance, closed(0.0, 1e3));
   } else if (const Reader b = e["box"]; b.present()) {
     region.kind = FixedRegionKind::box;
-    b.object(kInclusionBoxKeys);
-    required(b["min"], "the box's lower corner [x, y, z] in m");
-    required(b["max"], "the box's upper corner [x, y, z] in m");
-    b["min"].get(region.min);
-    b["max"].get(region.max);
-    if (!(region.max.array() >= region.min.array()).all()) b["max"].fail("must be at least min in every component");
+    read_box_corners(b, region.min, region.max, /*solid=*/false);
   } else {
-    const Reader sp = e["sphere"];
     region.kind = FixedRegionKind::sphere;
-    sp.object(kSphereKeys);
-    required(sp["center"], "the sphere's centre [x, y, z] in m");
-    required(sp["radius"], "the sphere's radius in m");
-    sp["center"].get(region.center);
-    sp["radius"].get(region.radius, open_closed(0.0, 1e3));
+    read_sphere(e["sphere"], region.center, region.radius);
   }
   return region;
 }

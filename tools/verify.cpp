@@ -166,7 +166,9 @@ int main(int argc, char** argv) {
   // Hertz's radius: the tool's, or with a curved body the two curvatures' (3.6).
   const double R_hertz = surface_radius > 0 ? R * surface_radius / (R + surface_radius) : R;
   const double E_star = hertz::effective_modulus(mat.young_modulus, mat.poisson_ratio);
-  const double thickness = scene.box.max[2] - scene.box.min[2];
+  // The layer of the finite-layer column: the box's height, or a box-less mesh body's extent in z.
+  const double thickness = scene.box_given ? scene.box.max[2] - scene.box.min[2]
+                                           : model.rest_position.row(2).maxCoeff() - model.rest_position.row(2).minCoeff();
   if (forces.empty()) forces = scene.verify.forces;
   if (forces.empty())
     for (int k = 1; k <= 10; ++k) forces.push_back(hertz::force(0.01 * k, R, E_star));
