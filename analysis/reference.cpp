@@ -10,6 +10,7 @@
 
 #include "core/model.h"
 #include "core/node_cloud.h"
+#include "analysis/held_tool_static.h"
 #include "analysis/static_contact.h"
 
 namespace palpate {
@@ -162,6 +163,50 @@ bool richardson(const double h[3], const double d[3], double& extrapolated, doub
   return true;
 }
 
+namespace {
+
+// Per quantity k (a force's depth, or a depth's force), Richardson over the levels (h = 1 /
+// (per_edge - 1)): only where the three finest levels converge monotonically at a plausible
+// order and the next coarser triple agrees on it; contact makes the sequence oscillate
+// (nodes enter the contact ring by ring), and then the finest level stands, with the spread
+// of the three finest as uncertainty.
+void extrapolate_levels(const std::vector<ReferenceLevel>& levels, const std::vector<std::vector<double>>& value,
+                        std::vector<double>& extrapolated, std::vector<double>& uncertainty,
+                        std::vector<double>& order) {
+  const size_t L = levels.size();
+  auto h_of = [&](size_t k) { return 1.0 / (levels[k].per_edge - 1); };
+  for (size_t f = 0; f < value[0].size(); ++f) {
+    auto extrapolate = [&](size_t first, double& v_star, double& p) {
+      const double h[3] = {h_of(first), h_of(first + 1), h_of(first + 2)};
+      const double v[3] = {value[first][f], value[first + 1][f], value[first + 2][f]};
+      return richardson(h, v, v_star, p);
+    };
+    double v_star, p;
+    const double finest = value[L - 1][f];
+    bool ok = extrapolate(L - 3, v_star, p) && p >= 0.5 && p <= 4.0;
+    double v_coarse = v_star, p_coarse = p;
+    if (ok && L >= 4) ok = extrapolate(L - 4, v_coarse, p_coarse) && std::abs(p_coarse - p) <= 0.5 * p;
+    double u;
+    if (ok) {
+      u = std::max(1.25 * std::abs(v_star - finest), std::abs(v_star - v_coarse));
+    } else {
+      v_star = finest;
+      p = 0.0;
+      double lo = finest, hi = finest;
+      for (size_t k = L - 3; k < L; ++k) {
+        lo = std::min(lo, value[k][f]);
+        hi = std::max(hi, value[k][f]);
+      }
+      u = hi - lo;
+    }
+    extrapolated.push_back(v_star);
+    uncertainty.push_back(u);
+    order.push_back(p);
+  }
+}
+
+}  // namespace
+
 Reference finite_cube_reference(const Scene& scene, const std::vector<double>& forces, const ReferenceOptions& options,
                                 const std::function<void(const std::string&)>& progress) {
   if (options.levels.size() < 3) throw std::invalid_argument("the reference needs at least three levels");
@@ -211,41 +256,82 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
     }
     ref.levels.push_back(std::move(level));
   }
-  const size_t L = ref.levels.size();
-  auto h_of = [&](size_t k) { return 1.0 / (ref.levels[k].per_edge - 1); };
-  for (size_t f = 0; f < forces.size(); ++f) {
-    auto extrapolate = [&](size_t first, double& d_star, double& p) {
-      const double h[3] = {h_of(first), h_of(first + 1), h_of(first + 2)};
-      const double d[3] = {ref.levels[first].indentation[f], ref.levels[first + 1].indentation[f],
-                           ref.levels[first + 2].indentation[f]};
-      return richardson(h, d, d_star, p);
-    };
-    // Richardson only where the three finest levels converge monotonically at a plausible
-    // order; contact makes the sequence oscillate (nodes enter the contact ring by ring),
-    // and then the finest level stands, with the spread of the three finest as uncertainty.
-    double d_star, p;
-    const double finest = ref.levels[L - 1].indentation[f];
-    bool ok = extrapolate(L - 3, d_star, p) && p >= 0.5 && p <= 4.0;
-    double d_coarse = d_star, p_coarse = p;  // the next coarser triple must agree on the order
-    if (ok && L >= 4) ok = extrapolate(L - 4, d_coarse, p_coarse) && std::abs(p_coarse - p) <= 0.5 * p;
-    double uncertainty;
-    if (ok) {
-      uncertainty = std::max(1.25 * std::abs(d_star - finest), std::abs(d_star - d_coarse));
-    } else {
-      d_star = finest;
-      p = 0.0;
-      double lo = finest, hi = finest;
-      for (size_t k = L - 3; k < L; ++k) {
-        lo = std::min(lo, ref.levels[k].indentation[f]);
-        hi = std::max(hi, ref.levels[k].indentation[f]);
-      }
-      uncertainty = hi - lo;
+  std::vector<std::vector<double>> per_level;
+  for (const ReferenceLevel& level : ref.levels) per_level.push_back(level.indentation);
+  extrapolate_levels(ref.levels, per_level, ref.indentation, ref.uncertainty, ref.order);
+  return ref;
+}
+
+Reference large_strain_reference(const Scene& scene, const std::vector<double>& depths, const std::vector<int>& levels,
+                                 const std::function<void(const std::string&)>& progress) {
+  if (levels.size() < 3) throw std::invalid_argument("the reference needs at least three levels");
+  if (!at_top_face_centre(scene, indenter_site(scene)))
+    throw std::invalid_argument("the large-strain reference is computed at the centre of the top face");
+  for (size_t k = 0; k < depths.size(); ++k)
+    if (!(depths[k] > 0) || (k > 0 && !(depths[k] > depths[k - 1])))
+      throw std::invalid_argument("the depths of the large-strain reference must be positive and increasing");
+  Reference ref;
+  ref.indentation = depths;
+  ref.key = large_strain_reference_key(scene);
+  for (int per_edge : levels) {
+    const auto start = std::chrono::steady_clock::now();
+    Scene s = scene;
+    s.model = "hex_fem";
+    s.hex_fem.formulation = HexFormulation::neo_hookean;
+    s.hex_fem.volumetric_integration = HexVolumetricIntegration::full;
+    // The family of graded lattices of finite_cube_reference (a node at the site, one
+    // geometric map refined uniformly), so Richardson applies in the same way.
+    s.distribution.type = DistributionType::graded_grid;
+    s.distribution.per_edge = per_edge;
+    s.distribution.spacing = 0.0;
+    s.distribution.focus_given = false;
+    s.distribution.first_spacing =
+        family_first_spacing(scene.box.max[2] - scene.box.min[2], ReferenceOptions{}.base_per_edge,
+                             0.05 * scene.indenter.radius, per_edge);
+    s.indenter.position_given = false;        // centred, just touching the centre node
+    s.integrator.allow_unstable_dt = true;    // a static solve: no time step to be stable
+    const Model model = build_model(s);
+    HeldToolStatics statics(model);
+    ReferenceLevel level;
+    level.per_edge = per_edge;
+    level.nodes = model.particle_count;
+    level.first_spacing = s.distribution.first_spacing;
+    int iterations = 0;
+    for (double d : depths) {
+      const HeldToolSolution sol = statics.solve(model.indenter_start - Vec3(0, 0, d));
+      if (!sol.converged)
+        throw std::runtime_error("large-strain reference level " + std::to_string(per_edge) + ", d = " +
+                                 std::to_string(d) + " m: " + sol.message);
+      level.forces.push_back(sol.tool_force[2]);
+      level.indentation.push_back(d);
+      iterations = sol.newton_iterations;
     }
-    ref.indentation.push_back(d_star);
-    ref.uncertainty.push_back(uncertainty);
-    ref.order.push_back(p);
+    level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (progress) {
+      std::ostringstream o;
+      o << "large-strain reference level " << per_edge << "^3 (" << level.nodes << " nodes, " << iterations
+        << " Newton iterations at the deepest): " << level.seconds << " s";
+      progress(o.str());
+    }
+    ref.levels.push_back(std::move(level));
+  }
+  std::vector<std::vector<double>> per_level;
+  for (const ReferenceLevel& level : ref.levels) per_level.push_back(level.forces);
+  std::vector<double> force_uncertainty;
+  extrapolate_levels(ref.levels, per_level, ref.forces, force_uncertainty, ref.order);
+  // The uncertainty in depth at a given force: the force's, divided by the slope dF/dd of
+  // the extrapolated curve (one-sided at the ends).
+  for (size_t k = 0; k < depths.size(); ++k) {
+    const size_t a = k == 0 ? 0 : k - 1, b = std::min(k + 1, depths.size() - 1);
+    const double slope = b > a ? (ref.forces[b] - ref.forces[a]) / (depths[b] - depths[a])
+                               : 1.5 * ref.forces[k] / depths[k];  // one depth: Hertz's F ~ d^(3/2)
+    ref.uncertainty.push_back(force_uncertainty[k] / slope);
   }
   return ref;
+}
+
+std::string large_strain_reference_key(const Scene& scene) {
+  return reference_key(scene) + " law=neo_hookean held";
 }
 
 double reference_indentation(const Reference& ref, double force) {
@@ -301,6 +387,8 @@ std::string reference_to_json(const Reference& ref) {
                       {"first_spacing", l.first_spacing},
                       {"indentation", l.indentation},
                       {"seconds", l.seconds}});
+  for (size_t k = 0; k < ref.levels.size(); ++k)
+    if (!ref.levels[k].forces.empty()) levels[k]["forces"] = ref.levels[k].forces;
   j["levels"] = levels;
   return j.dump(1);
 }
@@ -321,6 +409,7 @@ Reference reference_from_json(const std::string& text) {
       level.first_spacing = l.at("first_spacing").get<double>();
       level.indentation = l.at("indentation").get<std::vector<double>>();
       level.seconds = l.at("seconds").get<double>();
+      if (l.contains("forces")) level.forces = l.at("forces").get<std::vector<double>>();
       ref.levels.push_back(std::move(level));
     }
   } catch (const nlohmann::json::exception& e) {

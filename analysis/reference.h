@@ -79,6 +79,7 @@ struct ReferenceLevel {
   int nodes = 0;
   double first_spacing = 0.0;      // m
   std::vector<double> indentation; // per force, m
+  std::vector<double> forces;      // the large-strain reference: the force at each depth, N (else empty)
   double seconds = 0.0;            // wall time of the level (assembly, factorisation, sweep)
 };
 
@@ -102,6 +103,18 @@ std::string reference_key(const Scene& scene);
 Reference finite_cube_reference(const Scene& scene, const std::vector<double>& forces,
                                 const ReferenceOptions& options = {},
                                 const std::function<void(const std::string&)>& progress = {});
+
+// The large-strain reference (docs/physics.md §5, "The large-strain reference"): the scene's
+// block as neo-Hookean bricks (5.4)-(5.6) on the graded lattices of finite_cube_reference
+// (`levels` nodes per edge; the site must be the centre of the top face), the tool held at each
+// of `depths` (m, increasing) below first touch (held_tool_static.h), and Richardson on the
+// force at each depth, as on the indentation in finite_cube_reference. The result has
+// indentation = depths and forces = F*(d); its uncertainty is in depth, the force's
+// converted with the local slope of the extrapolated curve. Key: large_strain_reference_key.
+Reference large_strain_reference(const Scene& scene, const std::vector<double>& depths,
+                                 const std::vector<int>& levels = {17, 21, 25, 29},
+                                 const std::function<void(const std::string&)>& progress = {});
+std::string large_strain_reference_key(const Scene& scene);
 
 // d*(F) at an arbitrary force in the reference's range: d^(3/2) interpolated linearly
 // in F (Hertz: F ~ d^(3/2)), exact at the reference forces. NaN outside the range.

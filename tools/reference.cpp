@@ -28,6 +28,11 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
   --site X,Y            the site (m) on the top face (default: the scene's indenter.position
                         (x, y), else the centre); every level is graded toward it and
                         the key names it; refused off the face or closer than R to a wall
+  --depths D1,D2,...    the large-strain reference instead (docs/physics.md, "The
+                        large-strain reference"): neo-Hookean bricks on the graded lattices
+                        (--levels; default 17,21,25,29), the tool held at each depth
+                        (m, increasing) below first touch at the centre, Richardson on the
+                        force; for palpate-verify --reference FILE on neo-Hookean scenes
   --set KEY=VALUE       override a scene field (repeatable)
   --out FILE            write the reference as JSON (what palpate-verify --reference reads)
   --json                print the reference as JSON on stdout
@@ -39,8 +44,9 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
 int main(int argc, char** argv) {
   std::string scene_file, out_file;
   SceneOverrides overrides;
-  std::vector<double> forces;
+  std::vector<double> forces, depths;
   ReferenceOptions options;
+  bool levels_given = false;
   bool json = false, quiet = false;
   std::vector<double> site;
   try {
@@ -49,9 +55,10 @@ int main(int argc, char** argv) {
       auto value = [&] { return args.value(); };
       if (arg == "--scene") scene_file = value();
       else if (arg == "--forces") forces = cli::positive_list(value(), "--forces");
-      else if (arg == "--levels") options.levels = cli::positive_list<int>(value(), "--levels");
+      else if (arg == "--levels") options.levels = cli::positive_list<int>(value(), "--levels"), levels_given = true;
       else if (arg == "--first-spacing") options.base_first_spacing = cli::positive_list(value(), "--first-spacing").at(0);
       else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
+      else if (arg == "--depths") depths = cli::positive_list(value(), "--depths");
       else if (arg == "--out") out_file = value();
       else if (arg == "--site") {
         site = cli::number_list(value(), "--site");
@@ -85,9 +92,14 @@ int main(int argc, char** argv) {
     if (forces.empty()) forces = scene.verify.forces;
     if (forces.empty())
       for (int k = 1; k <= 10; ++k) forces.push_back(hertz::force(0.01 * k, scene.indenter.radius, E_star));
-    ref = finite_cube_reference(scene, forces, options, [&](const std::string& m) {
+    const auto progress = [&](const std::string& m) {
       if (!quiet) std::fprintf(stderr, "palpate-reference: %s\n", m.c_str());
-    });
+    };
+    if (!depths.empty())
+      ref = large_strain_reference(scene, depths, levels_given ? options.levels : std::vector<int>{17, 21, 25, 29},
+                                   progress);
+    else
+      ref = finite_cube_reference(scene, forces, options, progress);
     if (!out_file.empty()) {
       std::ofstream out(out_file);
       out << reference_to_json(ref) << "\n";
@@ -95,6 +107,20 @@ int main(int argc, char** argv) {
     }
     if (json) {
       std::cout << reference_to_json(ref) << "\n";
+      return 0;
+    }
+    if (!depths.empty()) {
+      std::printf("\nLarge-strain reference (neo-Hookean hex FEM, graded lattices, tool held, Richardson on F): %s\n",
+                  ref.key.c_str());
+      std::printf("%10s", "d [m]");
+      for (const auto& l : ref.levels) std::printf(" %9d^3", l.per_edge);
+      std::printf(" %11s %10s %6s %10s\n", "F* [N]", "+- d [m]", "p", "F_Hertz");
+      for (size_t k = 0; k < ref.forces.size(); ++k) {
+        std::printf("%10.4f", ref.indentation[k]);
+        for (const auto& l : ref.levels) std::printf(" %11.4f", l.forces[k]);
+        std::printf(" %11.4f %10.2e %6.2f %10.4f\n", ref.forces[k], ref.uncertainty[k], ref.order[k],
+                    hertz::force(ref.indentation[k], R, E_star));
+      }
       return 0;
     }
     std::printf("\nFinite-block reference (linear hex FEM, graded lattices, Richardson): %s\n", ref.key.c_str());

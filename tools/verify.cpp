@@ -205,7 +205,10 @@ int main(int argc, char** argv) {
       reference_note = "none (--reference none)";
     } else {
       reference = load_reference(reference_choice);
-      if (reference->key != reference_key(scene))
+      // A neo-Hookean scene may also be measured against the large-strain reference.
+      const bool large_strain = scene.material.law == MaterialLaw::neo_hookean &&
+                                reference->key == large_strain_reference_key(scene);
+      if (reference->key != reference_key(scene) && !large_strain)
         throw std::runtime_error("--reference: " + reference_choice + " is for '" + reference->key +
                                  "', the scene is '" + reference_key(scene) + "'");
     }

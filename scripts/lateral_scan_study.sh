@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# The palpation signal (docs/verification.md, "The lateral scan"): the force sweep of
+# scenes/palpation_lump.json at sites along y = 0 across the lump (centre (0.01, 0, -0.01) m,
+# radius 6 mm, 3x the matrix), each against the finite-block reference computed at that
+# site (palpate-reference --site: the linear hex FEM on lattices graded toward the site,
+# the lump blended per element, Richardson-extrapolated; stored in scenes/references/,
+# recomputed with --references), and the same sweep of the homogeneous
+# scenes/palpation_block.json (the tissue without the lump) for contrast.
+# From each force-depth curve the force at a fixed depth D follows by interpolation
+# (log F against log d, monotone): F(x) at depth D, the signal a palpating finger feels.
+# Writes DIR/<scene>_<x>.json (palpate-verify --json), DIR/lateral_scan.csv (one row
+# per site and force), DIR/lateral_scan.md (the tables) and DIR/lateral_scan.png.
+#
+# usage: scripts/lateral_scan_study.sh [--references] [--depth D] [--out DIR]
+#   --references  recompute the references at every site (about a minute each)
+#   --depth D     the fixed depth of the signal, m (default 0.0012)
+#   --sites LIST  x of the sites, m, comma-separated (default -0.02,-0.015,...,0.02)
+#   --out DIR     output folder (default docs/verification/lateral_scan)
+# BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
+# built there (Release) if missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+references=0
+depth=0.0012
+sites_list="-0.02,-0.015,-0.01,-0.005,0,0.005,0.01,0.015,0.02"
+out=docs/verification/lateral_scan
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --references) references=1 ;;
+    --depth) depth=${2:?--depth needs a value in m}; shift ;;
+    --sites) sites_list=${2:?--sites needs a list}; shift ;;
+    --out) out=${2:?--out needs a folder}; shift ;;
+    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "lateral_scan_study.sh: unknown option '$1'" >&2; exit 2 ;;
+  esac
+  shift
+done
+
+BUILD_DIR=${BUILD_DIR:-build}
+verify="$BUILD_DIR/bin/palpate-verify"
+reference="$BUILD_DIR/bin/palpate-reference"
+if [[ ! -x "$verify" || ! -x "$reference" ]]; then
+  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
+  cmake --build "$BUILD_DIR" -j2 --target palpate-verify palpate-reference
+fi
+mkdir -p "$out"
+IFS=, read -r -a sites <<< "$sites_list"
+
+for x in "${sites[@]}"; do
+  for scene in palpation_lump palpation_block; do
+    # The block's reference at the centre is stored already; off-centre ones are computed
+    # like the lump's (the key names the site, so verify finds each by itself).
+    file="scenes/references/${scene}_site_${x}_0.json"
+    [[ $scene == palpation_block && $x == 0 ]] && file=scenes/references/palpation_block.json
+    [[ $scene == palpation_lump && $x == 0 ]] && file=scenes/references/palpation_lump.json
+    if [[ $references == 1 || ! -f "$file" ]]; then
+      echo "lateral_scan_study.sh: palpate-reference --scene scenes/$scene.json --site $x,0" >&2
+      start=$SECONDS
+      "$reference" --scene "scenes/$scene.json" --site "$x,0" --out "$file" --quiet > /dev/null
+      echo "lateral_scan_study.sh: reference of $scene at x = $x: $((SECONDS - start)) s" >&2
+    fi
+    echo "lateral_scan_study.sh: palpate-verify --scene scenes/$scene.json --site $x,0" >&2
+    start=$SECONDS
+    "$verify" --scene "scenes/$scene.json" --site "$x,0" --json --quiet > "$out/${scene}_$x.json" || true
+    echo "lateral_scan_study.sh: $scene at x = $x: $((SECONDS - start)) s" >&2
+  done
+done
+
+/usr/bin/python3 scripts/plot_lateral_scan.py "$out" "$depth"

@@ -1,0 +1,168 @@
+// The large-strain static contact (analysis/held_tool_static.h) and its assembled tangent
+// (analysis/assembled_tangent.h): the coloured assembly against the matrix-free operator
+// on random vectors; at small depth the linear bricks held at a depth carry the force the
+// independent exact linear solve (static_contact.h) needs for that depth; global
+// equilibrium (the supports carry the tool's force) and the Signorini conditions at large
+// depth with the neo-Hookean bricks; the neo-Hookean reference at small depth is the
+// linear one; the large-strain reference's levels converge.
+#include <gtest/gtest.h>
+
+#include <Eigen/SparseCore>
+#include <cmath>
+#include <random>
+#include <sstream>
+
+#include "analysis/assembled_tangent.h"
+#include "analysis/held_tool_static.h"
+#include "analysis/reference.h"
+#include "analysis/static_contact.h"
+#include "core/solid.h"
+#include "core/state.h"
+#include "test_util.h"
+
+namespace palpate {
+namespace {
+
+std::string block(const std::string& formulation, int per_edge) {
+  return R"({"model": "hex_fem", "hex_fem": {"formulation": ")" + formulation +
+         R"("}, "body": {"distribution": {"type": "grid", "per_edge": )" + std::to_string(per_edge) +
+         R"(}}, "integrator": {"allow_unstable_dt": true}})";
+}
+
+TEST(AssembledTangent, EqualsTheMatrixFreeOperatorForEveryFormulation) {
+  for (const char* formulation : {"linear", "corotational", "neo_hookean"}) {
+    const Model model = test::model_from_json(block(formulation, 6));
+    int free_count = 0;
+    std::vector<int> free_dof(3 * model.particle_count, -1);
+    for (int i = 0; i < model.particle_count; ++i)
+      if (!model.fixed[i])
+        for (int c = 0; c < 3; ++c) free_dof[3 * i + c] = free_count++;
+    AssembledTangent tangent(model, free_dof, free_count);
+    EXPECT_EQ(tangent.colour_count(), 27) << "a lattice's distance-2 colouring";
+    // A deformed state (a shear and a random perturbation of 2 % of the spacing).
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(-1, 1);
+    Points x = model.rest_position;
+    for (int i = 0; i < model.particle_count; ++i)
+      if (!model.fixed[i]) x.col(i) += Vec3(0.1 * x(2, i) + 0.008 * u(rng), 0.008 * u(rng), 0.008 * u(rng));
+    Workspace work;
+    Eigen::SparseMatrix<double> lower;
+    tangent.assemble(x, work, lower);
+    const Eigen::SparseMatrix<double> K = Eigen::SparseMatrix<double>(lower.selfadjointView<Eigen::Lower>());
+    for (int trial = 0; trial < 3; ++trial) {
+      Points dx = Points::Zero(3, model.particle_count), df(3, model.particle_count);
+      Eigen::VectorXd v(free_count);
+      for (int i = 0; i < model.particle_count; ++i)
+        for (int c = 0; c < 3; ++c)
+          if (free_dof[3 * i + c] >= 0) v[free_dof[3 * i + c]] = dx(c, i) = u(rng);
+      linearize_elastic(model, x, work);
+      elastic_force_differential(model, work, dx, df);
+      const Eigen::VectorXd Kv = K * v;
+      double worst = 0, scale = 0;
+      for (int i = 0; i < model.particle_count; ++i)
+        for (int c = 0; c < 3; ++c)
+          if (const int k = free_dof[3 * i + c]; k >= 0) {
+            worst = std::max(worst, std::abs(Kv[k] + df(c, i)));
+            scale = std::max(scale, std::abs(df(c, i)));
+          }
+      // The corotational tangent is SOFA's approximation and not symmetric; the assembly
+      // symmetrises the lower triangle, so it is compared for linear and neo-Hookean only.
+      if (std::string(formulation) != "corotational") {
+        EXPECT_LT(worst, 1e-10 * scale) << formulation;
+      }
+    }
+  }
+}
+
+TEST(HeldToolStatics, LinearBricksAtSmallDepthAgreeWithTheExactLinearSolve) {
+  // The held solve measures gaps in the deformed configuration along the sphere's normal;
+  // the exact linear solve vertically, undeformed: they agree to O((a/R)^2), 0.5 % here.
+  const Model model = test::model_from_json(block("linear", 11));
+  HeldToolStatics held(model);
+  LinearStaticContact exact(model);
+  for (double d : {0.005, 0.015}) {
+    const HeldToolSolution sol = held.solve(model.indenter_start - Vec3(0, 0, d));
+    ASSERT_TRUE(sol.converged) << sol.message;
+    EXPECT_GT(sol.active_count, 0);
+    EXPECT_NEAR(sol.tool_force[0], 0.0, 1e-6 * sol.tool_force[2]);
+    EXPECT_NEAR(sol.tool_force[1], 0.0, 1e-6 * sol.tool_force[2]);
+    const StaticSolution lin = exact.solve(sol.tool_force[2]);
+    ASSERT_TRUE(lin.converged) << lin.message;
+    EXPECT_NEAR(lin.indentation, d, 5e-3 * d) << "F = " << sol.tool_force[2] << " N";
+  }
+}
+
+TEST(HeldToolStatics, LargeDepthNeoHookeanIsInEquilibriumAndSignorini) {
+  const Model model = test::model_from_json(block("neo_hookean", 9));
+  HeldToolStatics held(model);
+  const double R = model.indenter_radius, d = 0.3 * R;
+  const Vec3 c = model.indenter_start - Vec3(0, 0, d);
+  const HeldToolSolution sol = held.solve(c);
+  ASSERT_TRUE(sol.converged) << sol.message;
+  // Equilibrium checked with the element forces (not the assembled tangent): free nodes
+  // balanced by the contact pressures, the fixed nodes carrying the tool's force.
+  const Points& x = held.positions();
+  Points f(3, model.particle_count);
+  elastic_forces(model, x, f);
+  Vec3 support = Vec3::Zero();
+  double worst = 0;
+  for (int i = 0; i < model.particle_count; ++i) {
+    const double p = held.contact_pressure()[i];
+    EXPECT_GE(p, 0.0);
+    const double gap = (x.col(i) - c).norm() - R;
+    if (!model.fixed[i]) {
+      EXPECT_GT(gap, -1e-6 * R) << "node " << i << " penetrates";
+    }
+    if (p > 0) {
+      EXPECT_LT(std::abs(gap), 1e-6 * R) << "node " << i << " pressed off the sphere";
+    }
+    if (model.fixed[i]) {
+      support += f.col(i);
+      continue;
+    }
+    Vec3 r = f.col(i);
+    if (p > 0) r += p * (x.col(i) - c).normalized();
+    worst = std::max(worst, r.norm());
+  }
+  EXPECT_LT(worst, 1e-6 * sol.tool_force[2]);
+  // The body is in equilibrium: the supports' reactions (minus the elastic forces on the
+  // fixed nodes) balance the contact forces, that is they equal the force on the tool.
+  EXPECT_NEAR((-support - sol.tool_force).norm(), 0.0, 1e-5 * sol.tool_force[2])
+      << "supports " << support.transpose() << " tool " << sol.tool_force.transpose();
+}
+
+TEST(LargeStrainReference, AtSmallDepthItIsTheLinearBlock) {
+  Scene scene = test::scene_from_json(R"({"material": {"law": "neo_hookean"}})");
+  // d/R = 0.01 (contact radius a ~ 0.1 R, strains of a few per cent): the neo-Hookean
+  // bricks must carry the force of the linear ones within 1 % on every level.
+  const double d = 0.005;
+  const Reference nh = large_strain_reference(scene, {d, 2 * d}, {9, 11, 13});
+  ASSERT_EQ(nh.forces.size(), 2u);
+  ASSERT_EQ(nh.levels.size(), 3u);
+  EXPECT_EQ(nh.key, large_strain_reference_key(scene));
+  // The same lattices, linear bricks held at the same depth.
+  const auto exact = [](double v) {
+    std::ostringstream o;
+    o.precision(17);
+    o << v;
+    return o.str();
+  };
+  for (size_t k = 0; k < nh.levels.size(); ++k) {
+    const Model lin = test::model_from_json(
+        R"({"model": "hex_fem", "integrator": {"allow_unstable_dt": true}, "body": {"distribution": {"type": "graded_grid", "per_edge": )" +
+        std::to_string(nh.levels[k].per_edge) + R"(, "first_spacing": )" + exact(nh.levels[k].first_spacing) + "}}}");
+    HeldToolStatics held(lin);
+    const HeldToolSolution sol = held.solve(lin.indenter_start - Vec3(0, 0, d));
+    ASSERT_TRUE(sol.converged) << sol.message;
+    EXPECT_NEAR(nh.levels[k].forces[0], sol.tool_force[2], 0.01 * sol.tool_force[2])
+        << "level " << nh.levels[k].per_edge;
+  }
+  EXPECT_GT(nh.forces[1], nh.forces[0]);
+  // Round trip through the reference file format.
+  const Reference back = reference_from_json(reference_to_json(nh));
+  EXPECT_EQ(back.levels[2].forces, nh.levels[2].forces);
+  EXPECT_EQ(back.forces, nh.forces);
+}
+
+}  // namespace
+}  // namespace palpate
