@@ -36,6 +36,8 @@ state, median of 20).
   --ticks N         ticks pressed before measuring, >= 1 (default 1000)
   --server PATH     the palpate-server executable (default: next to this one)
   --help            print this text and exit
+Exit status: 0 when done; 1 when the server does not start or refuses a request (its
+message is printed); 2 for a wrong argument.
 )";
 
 struct Args {

@@ -593,13 +593,27 @@ TEST(VtkPrograms, VerifyWritesOneBodyAndToolPerForce) {
   fs::remove_all(dir);
 }
 
-TEST(VtkPrograms, HeadlessClientWritesWhatItReceived) {
+TEST(VtkPrograms, TheClientWritesFilesOfHeadlessRowsOnly) {
+  const ProgramResult realtime = run_program({PALPATE_CLIENT_BIN, "--vtk", "out"}, std::chrono::seconds(20));
+  EXPECT_EQ(realtime.status, 2);
+  EXPECT_NE(realtime.err.find("palpate-client: --vtk: writes the rows of --headless (add --headless)"), std::string::npos)
+      << realtime.err;
+  const ProgramResult surface = run_program({PALPATE_CLIENT_BIN, "--headless", "--vtk-surface"}, std::chrono::seconds(20));
+  EXPECT_EQ(surface.status, 2);
+  EXPECT_NE(surface.err.find("--vtk-surface, --vtk-ascii: only with --vtk DIR"), std::string::npos) << surface.err;
+  const ProgramResult help = run_program({PALPATE_VERIFY_BIN, "--help"}, std::chrono::seconds(20));
+  EXPECT_NE(help.out.find("--vtk DIR"), std::string::npos) << help.out;
+}
+
+// One scene: a full and a surface-only run of palpate-client --headless --vtk on the same
+// server, checked against the CSV of the full run and the model rebuilt here.
+void expect_client_files(const std::string& scene_name, const SceneOverrides& overrides) {
   const Server server;
   ASSERT_FALSE(server.address().empty()) << "the server did not start";
   const fs::path dir = fresh_dir("client");
-  const std::vector<std::string> common = {PALPATE_CLIENT_BIN, "--connect", server.address(), "--scene",
-                                           "hertz_cube_haptic", "--headless", "--forces", "10.36,29.3",
-                                           "--max-steps", "1500"};
+  std::vector<std::string> common = {PALPATE_CLIENT_BIN, "--connect", server.address(), "--scene", scene_name,
+                                     "--headless", "--forces", "10.36,29.3", "--max-steps", "1500"};
+  for (const auto& [key, value] : overrides) common.insert(common.end(), {"--set", key + "=" + value});
   auto with = [&](std::vector<std::string> extra) {
     std::vector<std::string> args = common;
     args.insert(args.end(), extra.begin(), extra.end());
@@ -619,7 +633,7 @@ TEST(VtkPrograms, HeadlessClientWritesWhatItReceived) {
   const auto entries = read_pvd(dir / "full" / "client.pvd");
   ASSERT_EQ(entries.size(), 4u);
 
-  const Scene scene = load_scene(PALPATE_SOURCE_DIR "/scenes/hertz_cube_haptic.json");
+  const Scene scene = load_scene(PALPATE_SOURCE_DIR "/scenes/" + scene_name + ".json", overrides);
   const Model m = build_model(scene);
   std::set<int> surface_vertices;
   for (int k = 0; k < m.surface_triangles.size(); ++k) surface_vertices.insert(m.surface_triangles.data()[k]);
@@ -683,6 +697,11 @@ TEST(VtkPrograms, HeadlessClientWritesWhatItReceived) {
     for (const int i : surface_vertices) {
       for (int k = 0; k < 3; ++k) EXPECT_EQ(part.positions.values[3 * p + k], body.positions.values[3 * i + k]);
       EXPECT_EQ(part.point_data.at("von_mises").values[p], vm_file.values[i]);
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_EQ(part.point_data.at("displacement").values[3 * p + k], u.values[3 * i + k]);
+        EXPECT_EQ(part.point_data.at("contact_force").values[3 * p + k],
+                  body.point_data.at("contact_force").values[3 * i + k]);
+      }
       EXPECT_EQ(part.point_data.at("displacement_magnitude").values[p],
                 body.point_data.at("displacement_magnitude").values[i]);
       ++p;
@@ -693,6 +712,19 @@ TEST(VtkPrograms, HeadlessClientWritesWhatItReceived) {
       EXPECT_EQ(vertices.at(static_cast<size_t>(part.connectivity.values[k])), body.connectivity.values[k]);
   }
   fs::remove_all(dir);
+}
+
+TEST(VtkPrograms, HeadlessClientWritesWhatItReceived) {
+  // A gmsh mesh (its boundary nodes come first: the surface vertices are 0 ... 775) and a
+  // lattice (the surface vertices interleave with the interior: their order matters).
+  {
+    SCOPED_TRACE("hertz_cube_haptic");
+    expect_client_files("hertz_cube_haptic", {});
+  }
+  {
+    SCOPED_TRACE("hertz_cube at 10^3");
+    expect_client_files("hertz_cube", {{"body.distribution.per_edge", "10"}});
+  }
 }
 
 }  // namespace
