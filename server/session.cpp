@@ -8,10 +8,9 @@
 // the loop and the other subscribers nothing.
 #include "server/session.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
-
-#include <algorithm>
 
 #include <capnp/message.h>
 #include <kj/debug.h>
