@@ -4,7 +4,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -16,6 +19,7 @@
 #include "cli/arguments.h"
 #include "clients/haptic.h"
 #include "core/hertz.h"
+#include "core/vtk_writer.h"
 #include "protocol/palpate.capnp.h"
 
 namespace {
@@ -70,6 +74,17 @@ the previous frame's local model at its target and against the zero-order hold.
                        N/m; its valid radius, m; the tick K was computed at); haptic: one
                        row per servo tick: time, segment, device x y z, rendered F xyz,
                        the newest frame's tick, render force xyz and contact force xyz
+  --vtk DIR            headless: ParaView files in DIR (created), one per row: the body as
+                       the frame at rest has it, DIR/body_K.vtu (K = the row, from 0: the
+                       surface triangles of SessionInfo over the particles, displacement,
+                       its magnitude and the von Mises stress as the server computed them,
+                       the contact force per particle; the tool's position and forces as
+                       field data), the sphere, DIR/tool_K.vtu, and DIR/client.pvd, the
+                       series of both with time = the frame's simTime (s). The steps then
+                       ask for the frame fields positions, contacts, displacementMagnitude
+                       and vonMises
+  --vtk-surface        with --vtk: ask for the surface vertices only (FrameFields.surfaceOnly)
+  --vtk-ascii          with --vtk: text .vtu files (default: base64 binary)
   --help               print this text and exit
 Exit status: 0 when done; 1 when the connection fails or the server refuses (its
 message, naming the field, is printed); 2 for a wrong argument.
@@ -86,6 +101,8 @@ struct Args {
   bool headless = false;
   long max_steps = 20000;
   std::string csv;
+  std::string vtk;  // --vtk DIR
+  bool vtk_surface = false, vtk_ascii = false;
   palpate::haptic::DeviceFlags haptic;  // haptic_rate > 0: the haptic mode
 };
 
@@ -110,12 +127,19 @@ Args parse_args(int argc, char** argv) {
     } else if (flag == "--headless") a.headless = true;
     else if (flag == "--max-steps") a.max_steps = static_cast<long>(args.integer(1, 1000000000));
     else if (flag == "--csv") a.csv = args.value();
+    else if (flag == "--vtk") a.vtk = args.value();
+    else if (flag == "--vtk-surface") a.vtk_surface = true;
+    else if (flag == "--vtk-ascii") a.vtk_ascii = true;
     else if (palpate::haptic::parse_device_flag(args, a.haptic)) {
     } else return false;
     return true;
   });
   if (a.haptic.haptic_rate > 0 && a.headless)
     palpate::cli::usage_error("palpate-client", "--haptic-rate: needs a real-time session, not --headless", kUsage);
+  if (!a.vtk.empty() && !a.headless)
+    palpate::cli::usage_error("palpate-client", "--vtk: writes the rows of --headless (add --headless)", kUsage);
+  if ((a.vtk_surface || a.vtk_ascii) && a.vtk.empty())
+    palpate::cli::usage_error("palpate-client", "--vtk-surface, --vtk-ascii: only with --vtk DIR", kUsage);
   return a;
 }
 
@@ -338,7 +362,94 @@ int run_haptic(const Args& a, Session::Client session, palpate::wire::SessionInf
   return 0;
 }
 
-int run_headless(const Args& a, Session::Client session, const Hertz& h, double dt, kj::WaitScope& ws) {
+// What a .vtu of the body needs from SessionInfo.
+struct Body {
+  std::vector<double> rest;              // 3 n, m
+  std::vector<uint32_t> triangles;       // 3 per triangle, particle indices
+  std::vector<uint32_t> surface;         // SessionInfo.surfaceVertices, ascending
+  double radius = 0;                     // the tool's, m
+};
+
+Body body_of(palpate::wire::SessionInfo::Reader info) {
+  Body b;
+  for (float v : info.getRestPositions()) b.rest.push_back(v);
+  for (uint32_t t : info.getSurfaceTriangles()) b.triangles.push_back(t);
+  for (uint32_t i : info.getSurfaceVertices()) b.surface.push_back(i);
+  b.radius = info.getRadius();
+  return b;
+}
+
+// The frame's body and tool as DIR/body_K.vtu, DIR/tool_K.vtu (core/vtk_writer.h); appends
+// their collection entries. The frame's per-particle lists are all particles, or (surfaceOnly)
+// the surface vertices in SessionInfo.surfaceVertices order.
+void write_frame_vtk(const Args& a, const Body& body, palpate::wire::Frame::Reader f, size_t k,
+                     std::vector<palpate::vtk::CollectionEntry>& series) {
+  namespace vtk = palpate::vtk;
+  const auto positions = f.getPositions();
+  const size_t n = body.rest.size() / 3;
+  const bool surface = a.vtk_surface;
+  const size_t points = surface ? body.surface.size() : n;
+  if (positions.size() != 3 * points || f.getDisplacementMagnitude().size() != points ||
+      f.getVonMises().size() != points)
+    throw std::runtime_error("--vtk: the frame of tick " + std::to_string(f.getTick()) + " has " +
+                             std::to_string(positions.size() / 3) + " positions, " +
+                             std::to_string(f.getDisplacementMagnitude().size()) + " displacements and " +
+                             std::to_string(f.getVonMises().size()) + " von Mises values for " +
+                             std::to_string(points) + " points");
+  // particle -> point of this grid
+  std::vector<int64_t> point_of(n, -1);
+  for (size_t p = 0; p < points; ++p) point_of[surface ? body.surface[p] : p] = static_cast<int64_t>(p);
+  vtk::UnstructuredGrid g;
+  g.points.reserve(positions.size());
+  for (float x : positions) g.points.push_back(x);
+  if (!body.triangles.empty()) {
+    std::vector<int64_t> c;
+    c.reserve(body.triangles.size());
+    for (uint32_t i : body.triangles) c.push_back(point_of.at(i));
+    vtk::add_cells(g, vtk::CellType::triangle, c);
+  } else {
+    vtk::add_vertex_cells(g);
+  }
+  vtk::DataArray displacement{"displacement", 3, {}}, magnitude{"displacement_magnitude", 1, {}},
+      von_mises{"von_mises", 1, {}}, contact{"contact_force", 3, std::vector<double>(3 * points, 0.0)};
+  for (size_t p = 0; p < points; ++p) {
+    const size_t i = surface ? body.surface[p] : p;
+    for (int c = 0; c < 3; ++c) displacement.values.push_back(positions[3 * p + c] - body.rest[3 * i + c]);
+    magnitude.values.push_back(f.getDisplacementMagnitude()[p]);
+    von_mises.values.push_back(f.getVonMises()[p]);
+  }
+  const auto nodes = f.getContactNodes();
+  const auto forces = f.getContactForces();
+  for (unsigned c = 0; c < nodes.size(); ++c) {
+    const int64_t p = nodes[c] < n ? point_of[nodes[c]] : -1;
+    if (p < 0) continue;  // a contact off the surface: not a point of a surface-only grid
+    for (int d = 0; d < 3; ++d) contact.values[3 * static_cast<size_t>(p) + d] = forces[3 * c + d];
+  }
+  g.point_data = {std::move(displacement), std::move(magnitude), std::move(von_mises), std::move(contact)};
+  auto vec = [](palpate::wire::Vec3::Reader v) { return std::vector<double>{v.getX(), v.getY(), v.getZ()}; };
+  g.field_data = {{"time", 1, {f.getSimTime()}},
+                  {"tick", 1, {static_cast<double>(f.getTick())}},
+                  {"tool_position", 3, vec(f.getIndenterPosition())},
+                  {"tool_contact_force", 3, vec(f.getToolContactForce())},
+                  {"force_command", 3, vec(f.getForceVector())}};
+  const auto c = f.getIndenterPosition();
+  vtk::UnstructuredGrid tool = vtk::sphere_surface(palpate::Vec3(c.getX(), c.getY(), c.getZ()), body.radius);
+  tool.field_data = g.field_data;
+  const vtk::Encoding encoding = a.vtk_ascii ? vtk::Encoding::ascii : vtk::Encoding::binary;
+  const std::filesystem::path dir(a.vtk);
+  const std::string name = std::to_string(k);
+  vtk::write_vtu(dir / ("body_" + name + ".vtu"), g, encoding);
+  vtk::write_vtu(dir / ("tool_" + name + ".vtu"), tool, encoding);
+  series.push_back({f.getSimTime(), 0, "body_" + name + ".vtu"});
+  series.push_back({f.getSimTime(), 1, "tool_" + name + ".vtu"});
+  vtk::write_pvd(dir / "client.pvd", series);
+}
+
+int run_headless(const Args& a, Session::Client session, palpate::wire::SessionInfo::Reader info, const Hertz& h,
+                 double dt, kj::WaitScope& ws) {
+  const Body body = a.vtk.empty() ? Body{} : body_of(info);
+  std::vector<palpate::vtk::CollectionEntry> series;
+  if (!a.vtk.empty()) std::filesystem::create_directories(a.vtk);
   std::vector<double> forces = a.forces;
   if (forces.empty()) {
     const double top = a.ramp > 0 ? a.ramp : 80.0;
@@ -354,13 +465,22 @@ int run_headless(const Args& a, Session::Client session, const Hertz& h, double 
     Row r;
     double previous_d = NAN;
     long steps = 0;
+    std::optional<capnp::Response<Session::StepResults>> last_frame;
     int quiet = 0;
     constexpr unsigned kChunk = 100;
     while (steps < a.max_steps) {
       auto step = session.stepRequest();
       step.setN(kChunk);
-      auto frame_response = step.send().wait(ws);
-      auto frame = frame_response.getFrame();
+      if (!a.vtk.empty()) {  // every chunk: the client does not know which one ends at rest
+        auto fields = step.initFields();
+        fields.setPositions(true);
+        fields.setContacts(true);
+        fields.setDisplacementMagnitude(true);
+        fields.setVonMises(true);
+        fields.setSurfaceOnly(a.vtk_surface);
+      }
+      last_frame.emplace(step.send().wait(ws));
+      auto frame = last_frame->getFrame();
       steps += kChunk;
       r = row_of(frame);
       r.time = frame.getSimTime();
@@ -371,6 +491,7 @@ int run_headless(const Args& a, Session::Client session, const Hertz& h, double 
       if (quiet >= 5) break;  // 0.5 s at dt = 1 ms: not just a turning point of an oscillation
     }
     print_row(r, h);
+    if (!a.vtk.empty() && last_frame) write_frame_vtk(a, body, last_frame->getFrame(), rows.size(), series);
     rows.push_back(r);
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -409,7 +530,7 @@ int main(int argc, char** argv) {
                 info.getSceneName().cStr(), info.getParticleCount(), info.getDt(),
                 info.getHeadless() ? "headless" : "real time", info.getRateHz(), info.getForceLimit(),
                 info.getBuildSeconds());
-    if (a.headless) return run_headless(a, opened.getSession(), h, info.getDt(), ws);
+    if (a.headless) return run_headless(a, opened.getSession(), info, h, info.getDt(), ws);
     if (a.haptic.haptic_rate > 0) return run_haptic(a, opened.getSession(), info, ws);
     return run_realtime(a, opened.getSession(), h, ws, client.getIoProvider().getTimer());
   } catch (const kj::Exception& e) {

@@ -688,6 +688,10 @@ double first_piola_stress(const Model& model, const Mat3& F, Mat3& P) {
   return piola_stress(model, F, model.lame_lambda, model.lame_mu, P);
 }
 
+double particle_first_piola_stress(const Model& model, const Mat3& F, int i, Mat3& P) {
+  return piola_stress(model, F, model.particle_lambda[i], model.particle_mu[i], P);
+}
+
 void mls_internal_forces(const Model& m, const Points& x, Points& f) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   f.setZero();

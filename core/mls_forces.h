@@ -27,6 +27,9 @@ Mat3 deformation_gradient(const Model& model, const Points& x, int i);
 // linear or neo-Hookean, + k_v (J - 1) cof F) for deformation gradient F; returns the energy
 // density psi, J/m^3 (+infinity for the neo-Hookean law at det F <= 0, where P is finite).
 double first_piola_stress(const Model& model, const Mat3& F, Mat3& P);
+// The same with particle i's own Lame parameters (Model::particle_lambda, particle_mu), as the
+// forces use them (core/stress.h reads the per-particle stress through it).
+double particle_first_piola_stress(const Model& model, const Mat3& F, int i, Mat3& P);
 
 // Tangent stiffness, matrix-free. mls_linearize caches F_i and S_i (9 x n
 // each; R_i for the corotational law, F_i^-T for the neo-Hookean) at x; mls_force_differential then gives df = (df/dx) dx = -K dx.

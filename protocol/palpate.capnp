@@ -280,6 +280,8 @@ struct SessionInfo {
   coupling @18 :Coupling;      # the coupling in effect for setPosition (after clamping)
   surfaceTriangles @19 :List(UInt32);  # 3 per triangle, particle indices, counterclockwise seen from
                                        # outside: the undeformed boundary surface (empty: none known)
+  surfaceVertices @20 :List(UInt32);   # the particles surfaceTriangles references, each once, ascending:
+                                       # the order of a frame's per-particle lists with FrameFields.surfaceOnly
 }
 
 # ---------------------------------------------------------------------------
@@ -296,6 +298,10 @@ struct Vec3 {
 struct FrameFields {
   positions @0 :Bool;   # Frame.positions (3 n Float32, ~70 KB for 18^3)
   contacts @1 :Bool;    # Frame.contactNodes / contactForces
+  displacementMagnitude @2 :Bool;  # Frame.displacementMagnitude (n Float32)
+  vonMises @3 :Bool;               # Frame.vonMises (n Float32)
+  surfaceOnly @4 :Bool;  # the per-particle lists (positions, displacementMagnitude, vonMises) carry
+                         # only SessionInfo.surfaceVertices, in that order (refused when it is empty)
 }
 
 # The force on a point near `origin`, linearised: F(x) = force + stiffness (x - origin),
@@ -320,7 +326,8 @@ struct Frame {
   forceCommand @7 :Float64;         # N, the pressing force in effect during this tick: -z of forceVector
   commandSeq @8 :UInt64;            # sequence number of the last command applied (0 = none)
   recoveries @9 :UInt32;            # blow-ups recovered so far in this session
-  positions @10 :List(Float32);     # 3 n: x y z per particle, m (when FrameFields.positions)
+  positions @10 :List(Float32);     # 3 n: x y z per particle, m (when FrameFields.positions; surfaceOnly:
+                                    # 3 per SessionInfo.surfaceVertices, in that order)
   contactNodes @11 :List(UInt32);   # particles in contact (when FrameFields.contacts)
   contactForces @12 :List(Float32); # 3 per contact: force on that particle, N
   toolVelocity @13 :Vec3;           # m/s
@@ -335,6 +342,10 @@ struct Frame {
   renderModel @20 :LocalModel;      # renderForce as a function of the device position (position mode:
                                     # origin = target, quasi-static tool; force mode: = contactModel)
   forceSaturated @21 :Bool;         # renderForce was clipped to DeviceLimits.maxForce
+  displacementMagnitude @22 :List(Float32);  # m, |x - X| per particle (when FrameFields.displacementMagnitude;
+                                             # surfaceOnly: per SessionInfo.surfaceVertices)
+  vonMises @23 :List(Float32);      # Pa, von Mises equivalent of the particle's (node's) Cauchy stress
+                                    # (core/stress.h; when FrameFields.vonMises; surfaceOnly as above)
 }
 
 interface FrameSink {

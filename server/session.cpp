@@ -8,12 +8,15 @@
 // the loop and the other subscribers nothing.
 #include "server/session.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
 #include <capnp/message.h>
 #include <kj/debug.h>
 #include <spdlog/spdlog.h>
+
+#include "core/stress.h"
 
 namespace palpate::server {
 
@@ -35,7 +38,41 @@ void fill_local_model(wire::LocalModel::Builder b, const LocalModel& m) {
   b.setStiffnessTick(m.stiffness_tick);
 }
 
-void fill_frame(wire::Frame::Builder f, const Snapshot& s, bool positions, bool contacts) {
+// Fields computed from a published frame's double-precision positions (Snapshot::body_position)
+// on the RPC thread, off the simulation thread: once per frame, whichever subscribers send it.
+struct DerivedFields {
+  int64_t publish_ns = -1, tick = -1;  // the frame they belong to
+  bool has_displacement = false, has_von_mises = false;
+  std::vector<float> displacement;  // n, |x - X|, m
+  std::vector<float> von_mises;     // n, Pa (core/stress.h)
+  std::vector<double> scratch;
+};
+
+// What one subscriber (or step() call) asked for (wire FrameFields).
+struct FieldRequest {
+  bool positions = false, contacts = false, displacement = false, von_mises = false, surface_only = false;
+  bool derived() const { return displacement || von_mises; }
+};
+
+FieldRequest request_of(wire::FrameFields::Reader f) {
+  return {f.getPositions(), f.getContacts(), f.getDisplacementMagnitude(), f.getVonMises(), f.getSurfaceOnly()};
+}
+
+// A per-particle list of `components` floats per particle, all particles or (surface_only) the
+// surface vertices in their order.
+template <class List>
+void fill_particle_list(List list, const float* values, int components, const std::vector<uint32_t>* vertices) {
+  if (vertices == nullptr) {
+    for (unsigned k = 0; k < list.size(); ++k) list.set(k, values[k]);
+    return;
+  }
+  unsigned k = 0;
+  for (const uint32_t i : *vertices)
+    for (int c = 0; c < components; ++c) list.set(k++, values[static_cast<size_t>(components) * i + c]);
+}
+
+void fill_frame(wire::Frame::Builder f, const Snapshot& s, const FieldRequest& want, const DerivedFields* derived,
+                const std::vector<uint32_t>& surface_vertices) {
   f.setTick(s.tick);
   f.setSimTime(s.sim_time);
   f.setPublishNs(s.publish_ns);
@@ -55,11 +92,16 @@ void fill_frame(wire::Frame::Builder f, const Snapshot& s, bool positions, bool 
   f.setForceSaturated(s.force_saturated);
   fill_local_model(f.initContactModel(), s.contact_model);
   fill_local_model(f.initRenderModel(), s.render_model);
-  if (positions && s.has_positions) {
-    auto list = f.initPositions(static_cast<unsigned>(s.positions.size()));
-    for (unsigned k = 0; k < s.positions.size(); ++k) list.set(k, s.positions[k]);
-  }
-  if (contacts && s.has_contacts) {
+  const std::vector<uint32_t>* vertices = want.surface_only ? &surface_vertices : nullptr;
+  auto particles = [&](size_t all) { return static_cast<unsigned>(vertices ? vertices->size() : all); };
+  if (want.positions && s.has_positions)
+    fill_particle_list(f.initPositions(3 * particles(s.positions.size() / 3)), s.positions.data(), 3, vertices);
+  if (derived != nullptr && want.displacement)
+    fill_particle_list(f.initDisplacementMagnitude(particles(derived->displacement.size())),
+                       derived->displacement.data(), 1, vertices);
+  if (derived != nullptr && want.von_mises)
+    fill_particle_list(f.initVonMises(particles(derived->von_mises.size())), derived->von_mises.data(), 1, vertices);
+  if (want.contacts && s.has_contacts) {
     auto nodes = f.initContactNodes(static_cast<unsigned>(s.contact_nodes.size()));
     for (unsigned k = 0; k < s.contact_nodes.size(); ++k) nodes.set(k, s.contact_nodes[k]);
     auto forces = f.initContactForces(static_cast<unsigned>(s.contact_forces.size()));
@@ -67,10 +109,13 @@ void fill_frame(wire::Frame::Builder f, const Snapshot& s, bool positions, bool 
   }
 }
 
-capnp::MessageSize frame_size_hint(const Snapshot& s, bool positions, bool contacts) {
+capnp::MessageSize frame_size_hint(const Snapshot& s, const FieldRequest& want, size_t surface_vertices) {
   uint64_t words = 160;
-  if (positions && s.has_positions) words += s.positions.size() / 2 + 2;
-  if (contacts && s.has_contacts) words += s.contact_nodes.size() + 4;
+  const size_t n = want.surface_only ? surface_vertices : s.positions.size() / 3;
+  if (want.positions && s.has_positions) words += 3 * n / 2 + 2;
+  if (want.displacement) words += n / 2 + 2;
+  if (want.von_mises) words += n / 2 + 2;
+  if (want.contacts && s.has_contacts) words += s.contact_nodes.size() + 4;
   return {words, 0};
 }
 
@@ -212,6 +257,8 @@ class SessionImpl final : public wire::Session::Server {
     auto triangles = info.initSurfaceTriangles(3 * static_cast<unsigned>(m.surface_triangles.cols()));
     const int* t = m.surface_triangles.data();
     for (unsigned k = 0; k < triangles.size(); ++k) triangles.set(k, static_cast<uint32_t>(t[k]));
+    auto vertices = info.initSurfaceVertices(static_cast<unsigned>(surface_vertices_.size()));
+    for (unsigned k = 0; k < vertices.size(); ++k) vertices.set(k, surface_vertices_[k]);
     info.setTouchHeight(m.touch_height);
     info.setRadius(m.indenter_radius);
     info.setYoungModulus(s.material.young_modulus);
@@ -315,16 +362,17 @@ class SessionImpl final : public wire::Session::Server {
     const uint32_t n = context.getParams().getN();
     check_step_count(n);
     if (job_.get() != nullptr) fail("step: a step() is already running in this session; wait for it");
-    const auto fields = context.getParams().getFields();
-    const bool positions = fields.getPositions(), contacts = fields.getContacts();
+    const FieldRequest fields = request_of(context.getParams().getFields());
+    check_fields("step: fields", fields);
     auto paf = kj::newPromiseAndFulfiller<void>();
     job_ = kj::mv(paf.fulfiller);
     sim_->request_steps(n);
     // A caller that goes mid-job no longer holds the session for the rest of the job
     // (up to 1e6 ticks): when its last reference goes, stop() ends the job at once.
     context.allowCancellation();
-    return paf.promise.then([this, context, positions, contacts]() mutable {
-      fill_frame(context.getResults().initFrame(), sim_->frames().front(), positions, contacts);
+    return paf.promise.then([this, context, fields]() mutable {
+      const Snapshot& frame = sim_->frames().front();
+      fill_frame(context.getResults().initFrame(), frame, fields, derived_for(frame, fields), surface_vertices_);
     });
   }
 
@@ -404,7 +452,7 @@ class SessionImpl final : public wire::Session::Server {
     wire::FrameSink::Client sink;
     double rate_hz;
     int64_t interval_ns;
-    bool positions, contacts;
+    FieldRequest fields;
     bool in_flight = false;
     bool dead = false;
     int64_t next_due_ns = 0;
@@ -446,6 +494,10 @@ class SessionImpl final : public wire::Session::Server {
     } else if (phase_ == Phase::ready) {
       force_limit_ = force_limit(sim_->scene());
       coupling_ = sim_->initial_coupling();
+      const auto& triangles = sim_->model().surface_triangles;
+      surface_vertices_.assign(triangles.data(), triangles.data() + triangles.size());
+      std::sort(surface_vertices_.begin(), surface_vertices_.end());
+      surface_vertices_.erase(std::unique(surface_vertices_.begin(), surface_vertices_.end()), surface_vertices_.end());
       spdlog::info("session {} opened ({}, {}, built in {:.2f} s)", id_, sim_->scene().name,
                    sim_->config().headless ? "headless" : "real-time", sim_->build_seconds());
     }
@@ -492,8 +544,8 @@ class SessionImpl final : public wire::Session::Server {
         if (sub.next_due_ns < now) sub.next_due_ns = now;
         continue;
       }
-      auto req = sub.sink.frameRequest(frame_size_hint(frame, sub.positions, sub.contacts));
-      fill_frame(req.initFrame(), frame, sub.positions, sub.contacts);
+      auto req = sub.sink.frameRequest(frame_size_hint(frame, sub.fields, surface_vertices_.size()));
+      fill_frame(req.initFrame(), frame, sub.fields, derived_for(frame, sub.fields), surface_vertices_);
       sub.in_flight = true;
       ++sub.sent;
       sub.next_due_ns += sub.interval_ns;
@@ -510,12 +562,47 @@ class SessionImpl final : public wire::Session::Server {
   }
 
   void update_wanted() {
-    bool positions = false, contacts = false;
+    bool positions = false, contacts = false, derived = false;
     for (const auto& s : subscribers_) {
-      positions = positions || s.positions;
-      contacts = contacts || s.contacts;
+      positions = positions || s.fields.positions;
+      contacts = contacts || s.fields.contacts;
+      derived = derived || s.fields.derived();
     }
-    sim_->set_wanted(positions, contacts);
+    sim_->set_wanted(positions, contacts, derived);
+  }
+
+  // surfaceOnly needs a surface (SessionInfo.surfaceVertices): refused, naming the field, without.
+  void check_fields(const char* field, const FieldRequest& fields) {
+    if (fields.surface_only && surface_vertices_.empty())
+      fail(std::string(field) + ".surfaceOnly: this session's body has no surface (SessionInfo.surfaceTriangles is "
+                                "empty, as for a node_file cloud); ask for every particle instead");
+  }
+
+  // The frame's derived fields that `want` asks for, computed now unless they already were for
+  // this frame; null when it asks for none or the frame has no double-precision positions yet
+  // (a subscriber newer than the frame).
+  const DerivedFields* derived_for(const Snapshot& s, const FieldRequest& want) {
+    if (!want.derived() || !s.has_body_position) return nullptr;
+    DerivedFields& d = derived_;
+    if (d.publish_ns != s.publish_ns || d.tick != s.tick) {
+      d.publish_ns = s.publish_ns;
+      d.tick = s.tick;
+      d.has_displacement = d.has_von_mises = false;
+    }
+    const Model& m = sim_->model();
+    const int n = m.particle_count;
+    if (want.displacement && !d.has_displacement) {
+      d.displacement.resize(static_cast<size_t>(n));
+      for (int i = 0; i < n; ++i)
+        d.displacement[i] = static_cast<float>((s.body_position.col(i) - m.rest_position.col(i)).norm());
+      d.has_displacement = true;
+    }
+    if (want.von_mises && !d.has_von_mises) {
+      von_mises_stress(m, s.body_position, d.scratch);
+      d.von_mises.assign(d.scratch.begin(), d.scratch.end());
+      d.has_von_mises = true;
+    }
+    return &d;
   }
 
   friend class SubscriptionImpl;
@@ -532,6 +619,8 @@ class SessionImpl final : public wire::Session::Server {
   double force_limit_ = 0.0;       // N, once phase_ == ready
   CouplingOptions coupling_;       // the coupling in effect (SessionInfo.coupling), once ready
   bool closed_ = false;            // Session.close() or the server's shutdown
+  std::vector<uint32_t> surface_vertices_;  // SessionInfo.surfaceVertices, once ready
+  DerivedFields derived_;                    // of the newest frame that needed them
   kj::Vector<kj::Own<kj::PromiseFulfiller<void>>> ready_waiters_;
   kj::Own<kj::PromiseFulfiller<void>> job_;
   std::list<Subscriber> subscribers_;
@@ -563,9 +652,10 @@ kj::Promise<void> SessionImpl::subscribe(SubscribeContext context) {
   const double rate = options.getRateHz();
   check_subscriber_rate(rate);
   if (subscribers_.size() >= 64) fail("subscribe: this session already has 64 subscribers");
-  Subscriber sub{ctx_.next_subscriber_id++, params.getSink(), rate,
-                 rate > 0.0 ? static_cast<int64_t>(1e9 / rate) : 0, options.getFields().getPositions(),
-                 options.getFields().getContacts()};
+  const FieldRequest fields = request_of(options.getFields());
+  check_fields("subscribe: options.fields", fields);
+  Subscriber sub{ctx_.next_subscriber_id++, params.getSink(), rate, rate > 0.0 ? static_cast<int64_t>(1e9 / rate) : 0,
+                 fields};
   sub.next_due_ns = now_ns();
   const uint32_t id = sub.id;
   subscribers_.push_back(kj::mv(sub));

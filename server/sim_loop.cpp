@@ -451,6 +451,9 @@ void Simulation::publish() {
     const double* p = state.position.data();
     for (size_t k = 0; k < s.positions.size(); ++k) s.positions[k] = static_cast<float>(p[k]);
   }
+  // One copy of 3 n doubles into the preallocated slot (same size: no allocation).
+  s.has_body_position = config_.headless || want_derived_.load(std::memory_order_relaxed);
+  if (s.has_body_position) s.body_position = state.position;
   s.contact_nodes.clear();
   s.contact_forces.clear();
   if (s.has_contacts) {

@@ -137,10 +137,12 @@ class Simulation {
   // RPC thread. Returns the command's sequence number (> 0), or 0 when the queue
   // already holds kMaxQueuedCommands commands (then nothing is queued or numbered).
   uint64_t enqueue(CommandType type, const Vec3& value = Vec3::Zero());
-  // The subscribers' needs, read by the loop at each publish.
-  void set_wanted(bool positions, bool contacts) {
+  // The subscribers' needs, read by the loop at each publish. derived: a field computed from
+  // the double-precision positions (Snapshot::body_position) on the RPC thread.
+  void set_wanted(bool positions, bool contacts, bool derived = false) {
     want_positions_.store(positions, std::memory_order_relaxed);
     want_contacts_.store(contacts, std::memory_order_relaxed);
+    want_derived_.store(derived, std::memory_order_relaxed);
   }
 
   // Headless: start a job of n ticks; take_job_done() turns true (and wake_fd fires)
@@ -208,7 +210,7 @@ class Simulation {
   // Any thread (atomic).
   std::atomic<Phase> phase_{Phase::starting};
   std::atomic<bool> stop_{false};
-  std::atomic<bool> want_positions_{false}, want_contacts_{false};
+  std::atomic<bool> want_positions_{false}, want_contacts_{false}, want_derived_{false};
 
   // Any thread, under command_mutex_.
   std::mutex command_mutex_;

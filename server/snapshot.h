@@ -45,8 +45,14 @@ struct Snapshot {
   std::vector<float> positions;        // 3 n (capacity preallocated)
   std::vector<uint32_t> contact_nodes; // m <= n (capacity n)
   std::vector<float> contact_forces;   // 3 m (capacity 3 n)
+  // The state's positions in double precision (3 x n, allocated by reserve()), filled when a
+  // subscriber wants a field derived from them (Frame.displacementMagnitude, vonMises): the
+  // RPC thread computes those from it, off the simulation thread.
+  bool has_body_position = false;
+  Points body_position;
 
   void reserve(int n) {
+    body_position.setZero(3, n);
     positions.reserve(3 * static_cast<size_t>(n));
     contact_nodes.reserve(static_cast<size_t>(n));
     contact_forces.reserve(3 * static_cast<size_t>(n));

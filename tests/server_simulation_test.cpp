@@ -244,5 +244,49 @@ TEST(Simulation, AFullCommandQueueRefusesCommands) {
   EXPECT_EQ(sim.enqueue(CommandType::set_force, press_down(1.0)), kMaxQueuedCommands + 1);
 }
 
+
+// A subscriber of a derived field (Frame.vonMises, displacementMagnitude) makes the loop copy
+// the double-precision positions into the frame (Snapshot::body_position): into the three
+// slots preallocated at the start (never another buffer: the loop does not allocate), only
+// while one is wanted, and equal to the single-precision positions it also publishes.
+TEST(Simulation, DerivedFieldsCopyThePositionsIntoPreallocatedSlots) {
+  SimConfig config;
+  config.headless = false;
+  config.try_realtime = false;
+  config.rate_hz = 1000;
+  Simulation sim(config, small_scene());
+  wait_until_started(sim);
+  ASSERT_EQ(sim.phase(), Phase::ready);
+  const int n = sim.model().particle_count;
+  auto frames_for = [&](int ms) {
+    std::vector<const Snapshot*> seen;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    while (std::chrono::steady_clock::now() < deadline) {
+      wait_for_wake(sim, 50);
+      if (sim.frames().take()) seen.push_back(&sim.frames().front());
+    }
+    return seen;
+  };
+  sim.set_wanted(false, false, false);
+  frames_for(50);  // frames published before the change are gone
+  for (const Snapshot* s : frames_for(100)) EXPECT_FALSE(s->has_body_position) << "tick " << s->tick;
+  sim.set_wanted(true, false, true);
+  frames_for(20);
+  std::set<const double*> buffers;
+  size_t checked = 0;
+  for (const Snapshot* s : frames_for(200)) {
+    ASSERT_TRUE(s->has_body_position) << "tick " << s->tick;
+    ASSERT_EQ(s->body_position.cols(), n);
+    buffers.insert(s->body_position.data());
+    ASSERT_EQ(s->positions.size(), 3 * static_cast<size_t>(n));
+    for (size_t k = 0; k < s->positions.size(); ++k)
+      EXPECT_EQ(s->positions[k], static_cast<float>(s->body_position.data()[k]));
+    ++checked;
+  }
+  EXPECT_GE(checked, 20u);
+  EXPECT_LE(buffers.size(), 3u) << "the triple buffer's slots, no others";
+  sim.stop();
+}
+
 }  // namespace
 }  // namespace palpate::server

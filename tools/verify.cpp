@@ -21,6 +21,8 @@
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/model.h"
+#include "core/node_cloud.h"
+#include "core/vtk_writer.h"
 #include "analysis/reference.h"
 #include "analysis/static_contact.h"
 #include "analysis/rest.h"
@@ -61,6 +63,12 @@ compares the indentation d with Hertz theory.
                       also measured against: auto (default; a stored reference with the
                       scene's key in the scene folder's references/), FILE, compute
                       (compute it now: minutes), or none
+  --vtk DIR           ParaView files in DIR (created): per force k of the sweep (from 0)
+                      the body at rest, DIR/body_K.vtu (displacement, von Mises, contact
+                      force per particle; the tool's position and force as field data),
+                      the sphere, DIR/tool_K.vtu, and DIR/verify.pvd, the series of both
+                      with time = k (the force itself is field data force_n)
+  --vtk-ascii         write the .vtu files as text (default: base64 binary, smaller)
 The tool is held on the vertical guide (the Hertz experiment; a scene's "free" guide
 is overridden), so it stays over the site.
 Indentation d: travel of the indenter below the height at which it touches the
@@ -101,6 +109,8 @@ int main(int argc, char** argv) {
   double surface_radius = 0;  // m, 0: a flat body
   double trace_interval = 0;
   std::optional<std::vector<double>> site;  // --site X,Y
+  std::string vtk_dir;  // --vtk DIR
+  vtk::Encoding vtk_encoding = vtk::Encoding::binary;
   try {
     for (cli::Arguments args(argc, argv); args.next();) {
       const std::string& arg = args.flag();
@@ -114,6 +124,8 @@ int main(int argc, char** argv) {
       else if (arg == "--quiet") quiet = true;
       else if (arg == "--trace") trace_interval = args.number();
       else if (arg == "--log-level") log_level = value();
+      else if (arg == "--vtk") vtk_dir = value();
+      else if (arg == "--vtk-ascii") vtk_encoding = vtk::Encoding::ascii;
       else if (arg == "--solve") {
         const std::string mode = value();
         if (mode != "dynamic" && mode != "static")
@@ -218,6 +230,20 @@ int main(int argc, char** argv) {
   }
   if (!quiet && !reference_note.empty()) std::fprintf(stderr, "palpate-verify: %s\n", reference_note.c_str());
 
+  // ParaView export (core/vtk_writer.h): the body's cells once, from its cloud.
+  vtk::UnstructuredGrid body_cells;
+  std::vector<vtk::CollectionEntry> vtk_series;
+  if (!vtk_dir.empty()) {
+    try {
+      std::filesystem::create_directories(vtk_dir);
+      body_cells.points.assign(3 * static_cast<size_t>(model.particle_count), 0.0);
+      vtk::add_cloud_cells(body_cells, make_node_cloud(scene));
+    } catch (const std::exception& e) {
+      std::cerr << "palpate-verify: --vtk " << vtk_dir << ": " << e.what() << "\n";
+      return 1;
+    }
+  }
+
   const Options& opt = loaded->opt;
   State state = make_state(model, opt);
   std::unique_ptr<LinearStaticContact> linear_static;
@@ -275,6 +301,23 @@ int main(int argc, char** argv) {
       row.tool_y = state.indenter_center[1];
       row.contact_force = state.indenter_contact_force[2];
       if (!row.at_rest) row.status = "not at rest";
+      if (!vtk_dir.empty()) {
+        try {
+          vtk::UnstructuredGrid body = vtk::body_state_grid(body_cells, model, state);
+          body.field_data.push_back({"force_n", 1, {row.force}});
+          vtk::UnstructuredGrid tool = vtk::sphere_surface(state.indenter_center, R);
+          tool.field_data = body.field_data;
+          const std::string name = std::to_string(k);
+          vtk::write_vtu(std::filesystem::path(vtk_dir) / ("body_" + name + ".vtu"), body, vtk_encoding);
+          vtk::write_vtu(std::filesystem::path(vtk_dir) / ("tool_" + name + ".vtu"), tool, vtk_encoding);
+          vtk_series.push_back({static_cast<double>(k), 0, "body_" + name + ".vtu"});
+          vtk_series.push_back({static_cast<double>(k), 1, "tool_" + name + ".vtu"});
+          vtk::write_pvd(std::filesystem::path(vtk_dir) / "verify.pvd", vtk_series);
+        } catch (const std::exception& e) {
+          std::cerr << "palpate-verify: --vtk: " << e.what() << "\n";
+          return 1;
+        }
+      }
     }
     rows.push_back(row);
     if (!quiet)

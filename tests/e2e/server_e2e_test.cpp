@@ -21,6 +21,7 @@
 #include <fstream>
 #include <mutex>
 #include <random>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -378,6 +379,106 @@ TEST(ServerE2E, SessionInfoCarriesTheSurfaceTriangles) {
     EXPECT_EQ(count, 1);
     EXPECT_EQ(directed.count({edge.second, edge.first}), 1u);
   }
+}
+
+// FrameFields.displacementMagnitude, vonMises and surfaceOnly (docs/protocol.md): sizes, the
+// displacement against the positions and restPositions, the surface vertices against the
+// triangles, a surface-only twin bit-identical at those vertices, and a real-time subscriber.
+TEST(ServerE2E, FramesCarryDisplacementAndVonMisesOnRequest) {
+  Client c;
+  auto open = [&](bool headless) {
+    auto req = c.server.openSessionRequest();
+    auto r = req.initRequest();
+    r.getScene().setName("hertz_cube");
+    r.initOverrides(1).set(0, "body.distribution.per_edge=8");
+    r.setHeadless(headless);
+    return req.send().wait(c.ws());
+  };
+  auto full_session = open(true);
+  auto twin_session = open(true);
+  auto info = full_session.getInfo();
+  const unsigned n = info.getParticleCount();
+  std::set<uint32_t> referenced;
+  for (uint32_t i : info.getSurfaceTriangles()) referenced.insert(i);
+  std::vector<uint32_t> vertices;
+  for (uint32_t i : info.getSurfaceVertices()) vertices.push_back(i);
+  ASSERT_EQ(vertices, std::vector<uint32_t>(referenced.begin(), referenced.end()));  // each once, ascending
+  ASSERT_EQ(vertices.size(), 8u * 8 * 8 - 6u * 6 * 6);  // the lattice's boundary nodes
+
+  auto press_and_step = [&](Session::Client session, bool surface_only) {
+    auto force = session.setForceRequest();
+    force.setNewtons(40.0);
+    force.send().wait(c.ws());
+    auto step = session.stepRequest();
+    step.setN(300);
+    auto fields = step.initFields();
+    fields.setPositions(true);
+    fields.setDisplacementMagnitude(true);
+    fields.setVonMises(true);
+    fields.setSurfaceOnly(surface_only);
+    return step.send().wait(c.ws());
+  };
+  auto full = press_and_step(full_session.getSession(), false);
+  auto twin = press_and_step(twin_session.getSession(), true);
+  auto f = full.getFrame();
+  auto t = twin.getFrame();
+  ASSERT_EQ(f.getPositions().size(), 3 * n);
+  ASSERT_EQ(f.getDisplacementMagnitude().size(), n);
+  ASSERT_EQ(f.getVonMises().size(), n);
+  auto rest = info.getRestPositions();
+  float peak = 0;
+  for (unsigned i = 0; i < n; ++i) {
+    double d2 = 0;
+    for (unsigned k = 0; k < 3; ++k) d2 += std::pow(double(f.getPositions()[3 * i + k]) - rest[3 * i + k], 2);
+    EXPECT_NEAR(f.getDisplacementMagnitude()[i], std::sqrt(d2), 1e-6) << "particle " << i;
+    EXPECT_TRUE(std::isfinite(f.getVonMises()[i]) && f.getVonMises()[i] >= 0) << "particle " << i;
+    peak = std::max(peak, f.getVonMises()[i]);
+  }
+  EXPECT_GT(peak, 10.0f) << "pressed with 40 N: the body is stressed (about 70 Pa at its peak here)";
+  ASSERT_EQ(t.getPositions().size(), 3 * vertices.size());
+  ASSERT_EQ(t.getVonMises().size(), vertices.size());
+  ASSERT_EQ(t.getDisplacementMagnitude().size(), vertices.size());
+  EXPECT_EQ(t.getTick(), f.getTick());
+  for (size_t p = 0; p < vertices.size(); ++p) {
+    const uint32_t i = vertices[p];
+    for (unsigned k = 0; k < 3; ++k) EXPECT_EQ(t.getPositions()[3 * p + k], f.getPositions()[3 * i + k]);
+    EXPECT_EQ(t.getVonMises()[p], f.getVonMises()[i]);
+    EXPECT_EQ(t.getDisplacementMagnitude()[p], f.getDisplacementMagnitude()[i]);
+  }
+  // Nothing asked, nothing sent.
+  auto plain = full_session.getSession().stepRequest();
+  plain.setN(1);
+  auto plain_response = plain.send().wait(c.ws());
+  EXPECT_EQ(plain_response.getFrame().getVonMises().size(), 0u);
+  EXPECT_EQ(plain_response.getFrame().getDisplacementMagnitude().size(), 0u);
+
+  // Real time: a subscriber of the surface's von Mises gets it in every frame.
+  class VonMisesSink final : public FrameSink::Server {
+   public:
+    std::vector<size_t> sizes;
+    size_t positions = 0;
+   protected:
+    kj::Promise<void> frame(FrameContext context) override {
+      sizes.push_back(context.getParams().getFrame().getVonMises().size());
+      positions += context.getParams().getFrame().getPositions().size();
+      return kj::READY_NOW;
+    }
+  };
+  auto realtime = c.open(false);
+  auto sink_owner = kj::heap<VonMisesSink>();
+  VonMisesSink& sink = *sink_owner;
+  FrameSink::Client sink_cap = kj::mv(sink_owner);
+  auto sub = realtime.subscribeRequest();
+  sub.setSink(sink_cap);
+  sub.getOptions().setRateHz(50);
+  sub.getOptions().getFields().setVonMises(true);
+  sub.getOptions().getFields().setSurfaceOnly(true);
+  auto handle = sub.send().wait(c.ws()).getSubscription();
+  c.pump(400);
+  ASSERT_GE(sink.sizes.size(), 5u);
+  // The first frame may predate the subscription's request reaching the loop.
+  for (size_t k = 2; k < sink.sizes.size(); ++k) EXPECT_EQ(sink.sizes[k], vertices.size()) << "frame " << k;
+  EXPECT_EQ(sink.positions, 0u);
 }
 
 TEST(ServerE2E, ForceCommandReachesTheStreamWithinTwoTicks) {
