@@ -205,6 +205,26 @@ void extrapolate_levels(const std::vector<ReferenceLevel>& levels, const std::ve
   }
 }
 
+// The scene of one reference level: the scene's block as hex bricks of `formulation` on the
+// graded lattice of per_edge nodes whose first spacing is `first_spacing`, for a static solve.
+Scene level_scene(const Scene& scene, int per_edge, HexFormulation formulation, double first_spacing) {
+  Scene s = scene;
+  s.model = "hex_fem";
+  s.hex_fem.formulation = formulation;
+  s.distribution.type = DistributionType::graded_grid;
+  s.distribution.per_edge = per_edge;
+  s.distribution.spacing = 0.0;
+  s.distribution.focus_given = false;
+  s.distribution.first_spacing = first_spacing;
+  // The site: the lattice is graded toward it (focus_given false: graded_focus takes the
+  // indenter's (x, y)), so a node lies on it at every level, and the sphere starts just
+  // touching that node; only (x, y) of the scene's position is the site.
+  if (s.indenter.position_given) s.indenter.position[2] = s.box.max[2] + s.indenter.radius;
+  s.material.law = MaterialLaw::stvk;       // the hex FEM has its own laws
+  s.integrator.allow_unstable_dt = true;    // a static solve: no time step to be stable
+  return s;
+}
+
 }  // namespace
 
 Reference finite_cube_reference(const Scene& scene, const std::vector<double>& forces, const ReferenceOptions& options,
@@ -218,21 +238,8 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
       options.base_first_spacing > 0 ? options.base_first_spacing : 0.05 * scene.indenter.radius;
   for (int per_edge : options.levels) {
     const auto start = std::chrono::steady_clock::now();
-    Scene s = scene;
-    s.model = "hex_fem";
-    s.hex_fem.formulation = HexFormulation::linear;
-    s.distribution.type = DistributionType::graded_grid;
-    s.distribution.per_edge = per_edge;
-    s.distribution.spacing = 0.0;
-    s.distribution.focus_given = false;
-    s.distribution.first_spacing =
-        family_first_spacing(height, options.base_per_edge, base_first_spacing, per_edge);
-    // The site: the lattice is graded toward it (focus_given false: graded_focus takes the
-    // indenter's (x, y)), so a node lies on it at every level, and the sphere starts just
-    // touching that node; only (x, y) of the scene's position is the site.
-    if (s.indenter.position_given) s.indenter.position[2] = s.box.max[2] + s.indenter.radius;
-    s.material.law = MaterialLaw::stvk;       // the hex FEM has its own (linear) law
-    s.integrator.allow_unstable_dt = true;    // a static solve: no time step to be stable
+    const Scene s = level_scene(scene, per_edge, HexFormulation::linear,
+                                family_first_spacing(height, options.base_per_edge, base_first_spacing, per_edge));
     const Model model = build_model(s);
     LinearStaticContact solver(model);
     ReferenceLevel level;
@@ -275,21 +282,12 @@ Reference large_strain_reference(const Scene& scene, const std::vector<double>& 
   ref.key = large_strain_reference_key(scene);
   for (int per_edge : levels) {
     const auto start = std::chrono::steady_clock::now();
-    Scene s = scene;
-    s.model = "hex_fem";
-    s.hex_fem.formulation = HexFormulation::neo_hookean;
-    s.hex_fem.volumetric_integration = HexVolumetricIntegration::full;
     // The family of graded lattices of finite_cube_reference (a node at the site, one
     // geometric map refined uniformly), so Richardson applies in the same way.
-    s.distribution.type = DistributionType::graded_grid;
-    s.distribution.per_edge = per_edge;
-    s.distribution.spacing = 0.0;
-    s.distribution.focus_given = false;
-    s.distribution.first_spacing =
-        family_first_spacing(scene.box.max[2] - scene.box.min[2], ReferenceOptions{}.base_per_edge,
-                             0.05 * scene.indenter.radius, per_edge);
-    s.indenter.position_given = false;        // centred, just touching the centre node
-    s.integrator.allow_unstable_dt = true;    // a static solve: no time step to be stable
+    Scene s = level_scene(scene, per_edge, HexFormulation::neo_hookean,
+                          family_first_spacing(scene.box.max[2] - scene.box.min[2], ReferenceOptions{}.base_per_edge,
+                                               0.05 * scene.indenter.radius, per_edge));
+    s.hex_fem.volumetric_integration = HexVolumetricIntegration::full;  // the bricks (5.4) integrate fully
     const Model model = build_model(s);
     HeldToolStatics statics(model);
     ReferenceLevel level;
@@ -304,13 +302,14 @@ Reference large_strain_reference(const Scene& scene, const std::vector<double>& 
                                  std::to_string(d) + " m: " + sol.message);
       level.forces.push_back(sol.tool_force[2]);
       level.indentation.push_back(d);
-      iterations = sol.newton_iterations;
+      iterations += sol.newton_iterations;
     }
     level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (progress) {
       std::ostringstream o;
       o << "large-strain reference level " << per_edge << "^3 (" << level.nodes << " nodes, " << iterations
-        << " Newton iterations at the deepest): " << level.seconds << " s";
+        << " Newton iterations in all): " << level.seconds << " s; F (N) at the depths:";
+      for (double F : level.forces) o << " " << F;
       progress(o.str());
     }
     ref.levels.push_back(std::move(level));

@@ -33,11 +33,15 @@
 #include "core/stress.h"
 #include "core/vtk_writer.h"
 #include "test_util.h"
+#include "tests/run_program.h"
 
 namespace fs = std::filesystem;
 
 namespace palpate {
 namespace {
+
+using test::ProgramResult;
+using test::run_program;
 
 // ---------------------------------------------------------------------------
 // A small reader of VTK XML files: elements, attributes, DataArray contents (ascii, or binary
@@ -432,58 +436,6 @@ TEST(VtkRoundTrip, InconsistentGridsAreRefusedNamingTheFile) {
 
 // ---------------------------------------------------------------------------
 // The programs.
-
-struct ProgramResult {
-  int status = -1;
-  std::string out, err;
-};
-
-// Runs a program to its end (killed at the timeout: status -1), stdout and stderr captured.
-ProgramResult run_program(const std::vector<std::string>& args, std::chrono::seconds timeout) {
-  int out[2], err[2];
-  if (pipe(out) != 0 || pipe(err) != 0) std::abort();
-  const pid_t pid = fork();
-  if (pid == 0) {
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    dup2(out[1], STDOUT_FILENO);
-    dup2(err[1], STDERR_FILENO);
-    for (int fd : {out[0], out[1], err[0], err[1]}) close(fd);
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
-  close(out[1]);
-  close(err[1]);
-  ProgramResult r;
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  bool open[2] = {true, true};
-  const int fds[2] = {out[0], err[0]};
-  std::string* text[2] = {&r.out, &r.err};
-  while ((open[0] || open[1]) && std::chrono::steady_clock::now() < deadline) {
-    pollfd p[2] = {{fds[0], POLLIN, 0}, {fds[1], POLLIN, 0}};
-    if (poll(p, 2, 100) <= 0) continue;
-    for (int k = 0; k < 2; ++k) {
-      if (!open[k] || !(p[k].revents & (POLLIN | POLLHUP))) continue;
-      char buf[4096];
-      const ssize_t n = read(fds[k], buf, sizeof buf);
-      if (n > 0) text[k]->append(buf, static_cast<size_t>(n));
-      else open[k] = false;
-    }
-  }
-  int status = 0;
-  if (waitpid(pid, &status, WNOHANG) == 0) {
-    kill(pid, SIGKILL);
-    waitpid(pid, &status, 0);
-    r.status = -1;
-  } else {
-    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  }
-  close(out[0]);
-  close(err[0]);
-  return r;
-}
 
 // palpate-server on a loopback port the system picks, for the client test.
 class Server {
