@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -248,7 +249,7 @@ void write_csv(const std::string& path, const std::vector<Row>& rows, const Hert
          "tool_x_m,tool_y_m,tool_z_m,contact_fx_n,contact_fy_n,contact_fz_n,render_fx_n,render_fy_n,render_fz_n,"
          "k_xx_n_per_m,k_xy_n_per_m,k_xz_n_per_m,k_yx_n_per_m,k_yy_n_per_m,k_yz_n_per_m,k_zx_n_per_m,k_zy_n_per_m,"
          "k_zz_n_per_m,valid_radius_m,stiffness_tick\n";
-  out.precision(9);
+  out.precision(std::numeric_limits<double>::max_digits10);  // doubles round-trip exactly
   for (const Row& r : rows) {
     out << r.time << ',' << r.tick << ',' << r.command << ',' << r.indentation << ',' << r.contact << ','
         << h.depth(r.contact);

@@ -12,7 +12,13 @@ packages=(
   libopenblas0-serial         # optimised BLAS for CHOLMOD's supernodal factorisation (4x faster than the reference BLAS)
   python3-matplotlib python3-numpy   # plots in docs/ (glue only)
   clang libclang-rt-14-dev    # fuzz/: libFuzzer (libclang_rt.fuzzer) for Debian's clang 14 (test.sh --sanitize)
+  chromium                    # the browser viewer's end-to-end test (headless, tests/browser/)
 )
+# node and npm build the browser viewer (clients/viewer: npm ci of its pinned lock file).
+# A machine may have them from elsewhere (e.g. a nodejs that bundles npm): only what
+# is missing is installed from Debian.
+command -v node >/dev/null 2>&1 || packages+=(nodejs)
+command -v npm >/dev/null 2>&1 || packages+=(npm)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -17,6 +17,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include <capnp/message.h>
@@ -27,7 +28,9 @@
 
 #include "cli/arguments.h"
 #include "core/model.h"
+#include "server/connection.h"
 #include "server/session.h"
+#include "server/web.h"
 
 namespace {
 
@@ -48,6 +51,16 @@ loop, or headless stepping on request. Once it accepts connections it prints one
                        files read and its model built before the server listens
   --scene-dir DIR      the scenes clients open by name, <name>.json, and the folder their
                        node and mesh files must lie in (default: scenes/ of the source tree)
+  --http ADDR:PORT     also listen for HTTP there (off by default; port 0: the system picks
+                       one): the same RPC protocol over WebSocket at /rpc, the browser
+                       viewer at / (its files from --web-root), /healthz and /readyz
+                       (docs/protocol.md, "WebSocket"); then a second line is printed,
+                       "palpate-server web on http://ADDR:PORT/"
+  --web-root DIR       the viewer's built files (default: viewer/ of the build tree, made
+                       from clients/viewer when npm was found at configure time)
+  --allow-origin O     a page origin (e.g. http://example.org:8080, or * for any) that may
+                       open WebSocket RPC sessions besides the server's own pages
+                       (repeatable)
   --rate HZ            real-time loop rate of sessions that ask for none, (0, 10000]
                        (default 1000)
   --spin-us US         the loop sleeps until US before a deadline, then spins, [0, 1e6]
@@ -65,9 +78,24 @@ message names the file, the field and the reason) or the address cannot be used;
 wrong argument.
 )";
 
+struct HostPort {
+  std::string host;
+  unsigned port = 0;
+};
+
+HostPort host_port(const std::string& flag, const std::string& v) {
+  const auto colon = v.rfind(':');
+  if (colon == std::string::npos) throw std::invalid_argument(flag + " expects ADDR:PORT, got '" + v + "'");
+  const long long port = palpate::cli::integer(v.substr(colon + 1), flag + ": port");
+  if (port < 0 || port > 65535) throw std::invalid_argument(flag + ": port must be in [0, 65535], got '" + v + "'");
+  return {v.substr(0, colon), static_cast<unsigned>(port)};
+}
+
 struct Args {
   std::string host = "127.0.0.1";
   unsigned port = 7420;
+  std::optional<HostPort> http;
+  palpate::server::WebOptions web;
   std::string log_level = "warn";
   int sndbuf = 256 * 1024;
   ServerOptions options;
@@ -78,16 +106,19 @@ Args parse_args(int argc, char** argv) {
   const fs::path source_dir = PALPATE_SOURCE_DIR;
   a.options.scene_dir = source_dir / "scenes";
   a.options.default_scene = source_dir / "scenes" / "hertz_cube.json";
+  a.web.root = PALPATE_VIEWER_DIR;
   palpate::cli::parse_or_exit(argc, argv, "palpate-server", kUsage, [&](palpate::cli::Arguments& args) {
     const std::string& flag = args.flag();
     if (flag == "--listen") {
-      const std::string v = args.value();
-      const auto colon = v.rfind(':');
-      if (colon == std::string::npos) throw std::invalid_argument("--listen expects ADDR:PORT, got '" + v + "'");
-      a.host = v.substr(0, colon);
-      const long long port = palpate::cli::integer(v.substr(colon + 1), "--listen: port");
-      if (port < 0 || port > 65535) throw std::invalid_argument("--listen: port must be in [0, 65535], got '" + v + "'");
-      a.port = static_cast<unsigned>(port);
+      const HostPort hp = host_port(flag, args.value());
+      a.host = hp.host;
+      a.port = hp.port;
+    } else if (flag == "--http") {
+      a.http = host_port(flag, args.value());
+    } else if (flag == "--web-root") {
+      a.web.root = args.value();
+    } else if (flag == "--allow-origin") {
+      a.web.allowed_origins.push_back(args.value());
     } else if (flag == "--scene") {
       a.options.default_scene = args.value();
     } else if (flag == "--scene-dir") {
@@ -137,24 +168,6 @@ bool check_default_scene(const ServerOptions& options) {
   return false;
 }
 
-// One client connection: its stream, the two-party network and the RPC system.
-struct Connection {
-  Connection(kj::Own<kj::AsyncIoStream> s, capnp::Capability::Client bootstrap)
-      : stream(kj::mv(s)),
-        network(*stream, capnp::rpc::twoparty::Side::SERVER, reader_options()),
-        rpc(capnp::makeRpcServer(network, kj::mv(bootstrap))) {
-    rpc.setFlowLimit(1 << 20);  // words of incoming calls in flight per connection
-  }
-  static capnp::ReaderOptions reader_options() {
-    capnp::ReaderOptions o;
-    o.traversalLimitInWords = 64 * 1024 * 1024;  // 512 MiB: inline scenes with node lists
-    return o;
-  }
-  kj::Own<kj::AsyncIoStream> stream;
-  capnp::TwoPartyVatNetwork network;
-  capnp::RpcSystem<capnp::rpc::twoparty::VatId> rpc;
-};
-
 struct LogErrors : kj::TaskSet::ErrorHandler {
   void taskFailed(kj::Exception&& e) override { spdlog::debug("connection ended: {}", e.getDescription().cStr()); }
 };
@@ -169,9 +182,9 @@ kj::Promise<void> accept_loop(kj::ConnectionReceiver& listener, capnp::Capabilit
             const int one = 1;
             stream->setsockopt(IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
             stream->setsockopt(SOL_SOCKET, SO_KEEPALIVE, &one, sizeof one);
-            auto connection = kj::heap<Connection>(kj::mv(stream), bootstrap);
+            auto connection = kj::heap<palpate::server::RpcConnection>(kj::mv(stream), bootstrap);
             spdlog::debug("connection accepted");
-            auto done = connection->network.onDisconnect();
+            auto done = connection->on_disconnect();
             connections.add(done.attach(kj::mv(connection)));
             return kj::Promise<void>(kj::READY_NOW);
           },
@@ -219,7 +232,30 @@ int main(int argc, char** argv) {
                            .eagerlyEvaluate([](kj::Exception&& e) {
                              spdlog::error("accept loop ended: {}", e.getDescription().cStr());
                            });
+      // The web listener (--http): WebSocket RPC, the viewer, the probes.
+      kj::Own<kj::ConnectionReceiver> web_listener;
+      kj::Own<palpate::server::WebServer> web;
+      kj::Promise<void> web_accepting = kj::READY_NOW;
+      unsigned web_port = 0;
+      if (args.http) {
+        auto web_address = io.provider->getNetwork().parseAddress(args.http->host, args.http->port).wait(io.waitScope);
+        web_listener = web_address->listen();
+        web_port = web_listener->getPort();
+        if (!args.web.root.empty() && !fs::is_regular_file(args.web.root / "index.html"))
+          spdlog::warn("--web-root {}: no index.html there (the viewer is not built): only /rpc, /healthz and "
+                       "/readyz are served",
+                       args.web.root.string());
+        palpate::server::WebProbes probes;
+        probes.ready = [] { return palpate::server::Probe{true, "ok: the default scene is valid"}; };
+        probes.health = [&ctx] { return ctx.health_probe(); };
+        web = kj::heap<palpate::server::WebServer>(io.provider->getTimer(), args.web, std::move(probes), bootstrap,
+                                                   args.sndbuf);
+        web_accepting = web->listen(*web_listener).eagerlyEvaluate([](kj::Exception&& e) {
+          spdlog::error("web accept loop ended: {}", e.getDescription().cStr());
+        });
+      }
       std::printf("palpate-server listening on %s:%u\n", args.host.c_str(), port);
+      if (args.http) std::printf("palpate-server web on http://%s:%u/\n", args.http->host.c_str(), web_port);
       std::fflush(stdout);
       spdlog::info("scene dir {}, default scene {}, {} Hz", ctx.options.scene_dir.string(),
                    ctx.options.default_scene.string(), ctx.options.rate_hz);
@@ -236,6 +272,9 @@ int main(int argc, char** argv) {
           .exclusiveJoin(io.provider->getTimer().afterDelay(1 * kj::SECONDS))
           .wait(io.waitScope);
       accepting = nullptr;
+      web_accepting = nullptr;
+      web = nullptr;
+      web_listener = nullptr;
     }  // connections (and with them every session and subscription) go here
     listener = nullptr;
   } catch (const kj::Exception& e) {

@@ -216,6 +216,8 @@ class SessionImpl final : public wire::Session::Server {
 
   void stop() { sim_->stop(); }
   wire::Session::Client self() { return thisCap(); }
+  const Simulation& simulation() const { return *sim_; }
+  bool closed() const { return closed_; }
 
   // Every subscriber gets done(reason) and is removed; resolves when each done() was
   // delivered or failed (a vanished client).
@@ -721,6 +723,36 @@ kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
 void ServerContext::stop_all() {
   for (auto& [id, s] : sessions) s->stop();
   for (Closing* c : closing_) c->sim->stop();
+}
+
+Probe ServerContext::health_probe(double min_rate_fraction, double max_miss_fraction) {
+  Probe probe;
+  std::map<uint32_t, HealthSample> samples;
+  int realtime = 0;
+  for (const auto& [id, s] : sessions) {
+    const Simulation& sim = s->simulation();
+    if (s->closed() || sim.config().headless || sim.phase() != Phase::ready || sim.status().paused) continue;
+    ++realtime;
+    const SimCounters c = sim.counters();
+    HealthSample now{c.ticks, c.elapsed_s, c.deadline_misses};
+    // Over the time since the previous probe (or since the session started).
+    HealthSample before{};
+    if (auto it = health_samples_.find(id); it != health_samples_.end()) before = it->second;
+    samples[id] = now;
+    const double seconds = now.elapsed_s - before.elapsed_s;
+    const double ticks = static_cast<double>(now.ticks - before.ticks);
+    if (seconds < 0.2) continue;  // too short to judge
+    const double rate = ticks / seconds, target = sim.config().rate_hz;
+    const double misses = ticks > 0 ? static_cast<double>(now.deadline_misses - before.deadline_misses) / ticks : 1.0;
+    if (rate < min_rate_fraction * target || misses > max_miss_fraction) {
+      probe.ok = false;
+      probe.detail += "session " + std::to_string(id) + ": " + std::to_string(rate) + " Hz of " +
+                      std::to_string(target) + " Hz, deadline misses " + std::to_string(100.0 * misses) + " %; ";
+    }
+  }
+  health_samples_ = std::move(samples);
+  if (probe.ok) probe.detail = "ok: " + std::to_string(realtime) + " real-time session(s) hold their rate";
+  return probe;
 }
 
 kj::Promise<void> ServerContext::close_all(const char* reason) {

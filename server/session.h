@@ -16,6 +16,7 @@
 #include "protocol/palpate.capnp.h"
 #include "server/requests.h"
 #include "server/sim_loop.h"
+#include "server/web.h"
 
 namespace palpate::server {
 
@@ -39,6 +40,12 @@ struct ServerContext {
   kj::Promise<void> close_all(const char* reason);
   void add_task(kj::Promise<void> task) { tasks_.add(kj::mv(task)); }
 
+  // /healthz (server/web.h): healthy while every running real-time session held, since
+  // the previous probe, at least min_rate_fraction of its rate with at most
+  // max_miss_fraction of its ticks missing their deadline (paused and headless sessions
+  // are not judged; an interval under 0.2 s is not judged).
+  Probe health_probe(double min_rate_fraction = 0.9, double max_miss_fraction = 0.05);
+
   // A session whose last reference went while its thread was still starting
   // (validating, reading files, building): cancelled and kept, without waiting for
   // it, until the thread has ended; then joined and freed.
@@ -53,6 +60,12 @@ struct ServerContext {
   struct ErrorHandler : kj::TaskSet::ErrorHandler {
     void taskFailed(kj::Exception&& e) override;
   } error_handler_;
+  struct HealthSample {
+    int64_t ticks = 0;
+    double elapsed_s = 0.0;
+    uint64_t deadline_misses = 0;
+  };
+  std::map<uint32_t, HealthSample> health_samples_;  // by session id, at the previous probe
   std::set<Closing*> closing_;  // declared before tasks_: a Closing (held by a task) erases itself
   kj::TaskSet tasks_{error_handler_};
 };

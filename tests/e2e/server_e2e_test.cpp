@@ -27,11 +27,14 @@
 #include <thread>
 #include <vector>
 
+#include <capnp/compat/websocket-rpc.h>
 #include <capnp/ez-rpc.h>
+#include <capnp/rpc-twoparty.h>
 #include <capnp/message.h>
 #include <capnp/serialize.h>
 #include <gtest/gtest.h>
 #include <kj/async-io.h>
+#include <kj/compat/http.h>
 #include <kj/timer.h>
 
 #include "protocol/palpate.capnp.h"
@@ -73,16 +76,17 @@ class ServerProcess {
       dup2(out[1], STDOUT_FILENO);
       close(out[0]);
       close(out[1]);
-      execl(PALPATE_SERVER_BIN, PALPATE_SERVER_BIN, "--listen", "127.0.0.1:0", "--scene-dir",
+      execl(PALPATE_SERVER_BIN, PALPATE_SERVER_BIN, "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--scene-dir",
             PALPATE_SOURCE_DIR "/scenes", "--log-level", "error", static_cast<char*>(nullptr));
       _exit(127);
     }
     close(out[1]);
-    // Readiness: the "listening on 127.0.0.1:PORT" line (bounded wait).
+    // Readiness: the "listening on 127.0.0.1:PORT" and "web on http://127.0.0.1:PORT/"
+    // lines (bounded wait).
     std::string line;
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
     fcntl(out[0], F_SETFL, O_NONBLOCK);
-    while (line.find('\n') == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+    while (line.find("/\n") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
       char buf[256];
       const ssize_t n = read(out[0], buf, sizeof buf);
       if (n > 0) line.append(buf, static_cast<size_t>(n));
@@ -90,12 +94,15 @@ class ServerProcess {
       else std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
     stdout_fd_ = out[0];
-    const auto colon = line.rfind(':');
-    if (line.find("listening on") == std::string::npos || colon == std::string::npos) {
+    const auto first = line.substr(0, line.find('\n'));
+    const auto colon = first.rfind(':');
+    const auto web = line.find("web on http://127.0.0.1:");
+    if (first.find("listening on") == std::string::npos || colon == std::string::npos || web == std::string::npos) {
       std::fprintf(stderr, "server did not start: '%s'\n", line.c_str());
       std::abort();
     }
-    port_ = std::stoi(line.substr(colon + 1));
+    port_ = std::stoi(first.substr(colon + 1));
+    web_port_ = std::stoi(line.substr(web + std::string("web on http://127.0.0.1:").size()));
   }
   ~ServerProcess() {
     if (pid_ > 0) {
@@ -105,6 +112,7 @@ class ServerProcess {
     close(stdout_fd_);
   }
   int port() const { return port_; }
+  int web_port() const { return web_port_; }
   pid_t pid() const { return pid_; }
   std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
   bool alive() const { return kill(pid_, 0) == 0 && waitpid(pid_, nullptr, WNOHANG) == 0; }
@@ -143,6 +151,7 @@ class ServerProcess {
   pid_t pid_ = -1;
   int stdout_fd_ = -1;
   int port_ = 0;
+  int web_port_ = 0;
 };
 
 ServerProcess* g_server = nullptr;
@@ -207,6 +216,46 @@ class RecordingSink final : public FrameSink::Server {
   }
 };
 
+// hertz_cube with overrides ("key=value"), over either transport.
+Session::Client open_session(PalpateServer::Client& server, kj::WaitScope& ws, bool headless,
+                             const std::vector<std::string>& overrides = {"body.distribution.per_edge=8"}) {
+  auto req = server.openSessionRequest();
+  auto r = req.initRequest();
+  r.getScene().setName("hertz_cube");
+  auto o = r.initOverrides(static_cast<unsigned>(overrides.size()));
+  for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
+  r.setHeadless(headless);
+  return req.send().wait(ws).getSession();
+}
+
+// A client in a thread of its own that opens a real-time session, subscribes to every
+// tick's positions and then never reads (its thread stops running its event loop) until
+// release() (or 20 s).
+template <class ClientType>
+class StalledSubscriber {
+ public:
+  StalledSubscriber() : thread_([this] { run(); }) {
+    std::unique_lock<std::mutex> lock(m_);
+    cv_.wait_for(lock, std::chrono::seconds(10), [&] { return subscribed_; });
+  }
+  ~StalledSubscriber() { release(); }
+  void release() {
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      release_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  void run();
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool subscribed_ = false, release_ = false;
+  std::thread thread_;  // last: started once the members above exist
+};
+
 struct Client {
   Client() : Client(g_server->address()) {}
   explicit Client(const std::string& address) : ez(address), server(ez.getMain<PalpateServer>()) {}
@@ -217,13 +266,7 @@ struct Client {
 
   // hertz_cube with overrides ("key=value").
   Session::Client open(bool headless, std::vector<std::string> overrides = {"body.distribution.per_edge=8"}) {
-    auto req = server.openSessionRequest();
-    auto r = req.initRequest();
-    r.getScene().setName("hertz_cube");
-    auto o = r.initOverrides(static_cast<unsigned>(overrides.size()));
-    for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
-    r.setHeadless(headless);
-    return req.send().wait(ws()).getSession();
+    return open_session(server, ws(), headless, overrides);
   }
 
   // The hertz_cube of open() with the tool free in 3-D, opened with `device` limits
@@ -266,6 +309,24 @@ std::vector<uint8_t> frame_bytes(palpate::wire::Frame::Reader frame) {
   auto words = capnp::messageToFlatArray(mb);
   auto bytes = words.asBytes();
   return {bytes.begin(), bytes.end()};
+}
+
+template <class ClientType>
+void StalledSubscriber<ClientType>::run() {
+  ClientType s;
+  auto session = open_session(s.server, s.ws(), false);
+  auto sub = session.subscribeRequest();
+  sub.setSink(kj::heap<RecordingSink>());
+  sub.getOptions().setRateHz(0);
+  sub.getOptions().getFields().setPositions(true);
+  auto handle = sub.send().wait(s.ws()).getSubscription();
+  {
+    std::lock_guard<std::mutex> lock(m_);
+    subscribed_ = true;
+  }
+  cv_.notify_all();
+  std::unique_lock<std::mutex> lock(m_);
+  cv_.wait_for(lock, std::chrono::seconds(20), [&] { return release_; });  // never reads meanwhile
 }
 
 double achieved_rate(Client& c, Session::Client& s) {
@@ -712,29 +773,7 @@ TEST(ServerE2E, BlowUpIsDetectedRecoveredAndNeverStreamed) {
 // A client that subscribes to every tick with all positions and then never reads
 // (its thread stops running its event loop), while another session is measured.
 TEST(ServerE2E, StalledAndVanishingClientsCostOthersNothing) {
-  std::mutex m;
-  std::condition_variable cv;
-  bool subscribed = false, release = false;
-  std::thread stalled([&] {
-    Client s;
-    auto session = s.open(false);
-    auto sub = session.subscribeRequest();
-    sub.setSink(kj::heap<RecordingSink>());
-    sub.getOptions().setRateHz(0);
-    sub.getOptions().getFields().setPositions(true);
-    auto handle = sub.send().wait(s.ws()).getSubscription();
-    {
-      std::lock_guard<std::mutex> lock(m);
-      subscribed = true;
-    }
-    cv.notify_all();
-    std::unique_lock<std::mutex> lock(m);
-    cv.wait_for(lock, std::chrono::seconds(20), [&] { return release; });  // never reads meanwhile
-  });
-  {
-    std::unique_lock<std::mutex> lock(m);
-    cv.wait_for(lock, std::chrono::seconds(10), [&] { return subscribed; });
-  }
+  StalledSubscriber<Client> stalled;
 
   Client c;
   auto session = c.open(false);
@@ -760,12 +799,7 @@ TEST(ServerE2E, StalledAndVanishingClientsCostOthersNothing) {
   sink.frames.clear();
   c.pump(1500);
   const double rate = achieved_rate(c, session);
-  {
-    std::lock_guard<std::mutex> lock(m);
-    release = true;
-  }
-  cv.notify_all();
-  stalled.join();
+  stalled.release();
   EXPECT_GT(rate, kMinRateHz);
   EXPECT_GT(sink.frames.size(), kMinFullRateFrames) << "the full-rate subscriber lost frames to a stalled neighbour";
   EXPECT_TRUE(g_server->alive());
@@ -1209,6 +1243,264 @@ TEST(ServerE2E, ProgramsPrintTheirUsageAndRefuseGarbage) {
   const ProgramResult level = run_program({PALPATE_SERVER_BIN, "--log-level", "loud"}, std::chrono::seconds(20));
   EXPECT_EQ(level.status, 2);
   EXPECT_NE(level.err.find("--log-level: 'loud' is not one of"), std::string::npos) << level.err;
+}
+
+// ---------------------------------------------------------------------------
+// The same protocol over WebSocket (palpate-server --http: /rpc).
+
+// Random bytes for the WebSocket handshake key and the client's frame masks.
+class Entropy final : public kj::EntropySource {
+ public:
+  void generate(kj::ArrayPtr<kj::byte> buffer) override {
+    for (auto& b : buffer) b = static_cast<kj::byte>(rng_());
+  }
+
+ private:
+  std::mt19937 rng_{std::random_device{}()};
+};
+
+// A Cap'n Proto client over ws://127.0.0.1:WEB/rpc with its own event loop (one per
+// thread), built from kj-http's WebSocket client and capnp's WebSocketMessageStream.
+struct WsClient {
+  explicit WsClient(const std::string& origin = "") : io(kj::setupAsyncIo()) {
+    kj::HttpHeaderTable::Builder builder;
+    const kj::HttpHeaderId origin_id = builder.add("Origin");
+    table = builder.build();
+    kj::HttpClientSettings settings;
+    settings.entropySource = entropy;
+    http = kj::newHttpClient(io.provider->getTimer(), *table, io.provider->getNetwork(), nullptr, settings);
+    kj::HttpHeaders headers(*table);
+    if (!origin.empty()) headers.set(origin_id, origin);
+    const std::string url = "http://127.0.0.1:" + std::to_string(g_server->web_port()) + "/rpc";
+    auto response = http->openWebSocket(url, headers).wait(io.waitScope);
+    status = response.statusCode;
+    if (!response.webSocketOrBody.is<kj::Own<kj::WebSocket>>()) return;
+    socket = kj::mv(response.webSocketOrBody.get<kj::Own<kj::WebSocket>>());
+    stream = kj::heap<capnp::WebSocketMessageStream>(*socket);
+    network = kj::heap<capnp::TwoPartyVatNetwork>(*stream, capnp::rpc::twoparty::Side::CLIENT);
+    rpc = kj::heap(capnp::makeRpcClient(*network));
+    capnp::MallocMessageBuilder vat;
+    auto host = vat.initRoot<capnp::rpc::twoparty::VatId>();
+    host.setSide(capnp::rpc::twoparty::Side::SERVER);
+    server = rpc->bootstrap(host).castAs<PalpateServer>();
+  }
+  kj::WaitScope& ws() { return io.waitScope; }
+  void pump(int ms) { io.provider->getTimer().afterDelay(ms * kj::MILLISECONDS).wait(ws()); }
+
+  kj::AsyncIoContext io;
+  Entropy entropy;
+  kj::Own<kj::HttpHeaderTable> table;
+  kj::Own<kj::HttpClient> http;
+  unsigned status = 0;  // of the upgrade: 101 when accepted
+  kj::Own<kj::WebSocket> socket;
+  kj::Own<capnp::WebSocketMessageStream> stream;
+  kj::Own<capnp::TwoPartyVatNetwork> network;
+  kj::Own<capnp::RpcSystem<capnp::rpc::twoparty::VatId>> rpc;
+  PalpateServer::Client server = nullptr;
+};
+
+// A raw connection to the web port: bytes in, bytes out, with a timeout.
+struct RawSocket {
+  RawSocket() {
+    fd = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<uint16_t>(g_server->web_port()));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) std::abort();
+  }
+  ~RawSocket() { close(fd); }
+  void send(const std::string& bytes) const {
+    size_t sent = 0;
+    while (sent < bytes.size()) {
+      const ssize_t n = ::send(fd, bytes.data() + sent, bytes.size() - sent, MSG_NOSIGNAL);
+      if (n <= 0) return;  // the server closed: fine, the caller checks what it read
+      sent += static_cast<size_t>(n);
+    }
+  }
+  // Everything until the peer closes or `ms` pass (or, with headers_only, until the end
+  // of a response's headers).
+  std::string read_all(int ms, bool headers_only = false) const {
+    std::string got;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    while (std::chrono::steady_clock::now() < deadline) {
+      if (headers_only && got.find("\r\n\r\n") != std::string::npos) break;
+      pollfd p{fd, POLLIN, 0};
+      if (poll(&p, 1, 20) <= 0) continue;
+      char buf[4096];
+      const ssize_t n = recv(fd, buf, sizeof buf, 0);
+      if (n <= 0) break;
+      got.append(buf, static_cast<size_t>(n));
+    }
+    return got;
+  }
+  int fd;
+};
+
+std::string upgrade_request(const std::string& path, const std::string& origin) {
+  std::string r = "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(g_server->web_port()) +
+                  "\r\nConnection: Upgrade\r\nUpgrade: websocket\r\nSec-WebSocket-Version: 13\r\n"
+                  "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
+  if (!origin.empty()) r += "Origin: " + origin + "\r\n";
+  return r + "\r\n";
+}
+
+// A masked client frame (RFC 6455 5.2) with `length` bytes of `payload` (repeated).
+std::string client_frame(uint8_t opcode, const std::string& payload, size_t length) {
+  std::string f;
+  f += static_cast<char>(0x80 | opcode);
+  if (length < 126) {
+    f += static_cast<char>(0x80 | length);
+  } else if (length < 65536) {
+    f += static_cast<char>(0x80 | 126);
+    f += static_cast<char>(length >> 8);
+    f += static_cast<char>(length & 0xff);
+  } else {
+    f += static_cast<char>(0x80 | 127);
+    for (int k = 7; k >= 0; --k) f += static_cast<char>((static_cast<uint64_t>(length) >> (8 * k)) & 0xff);
+  }
+  f += std::string("\x12\x34\x56\x78", 4);
+  for (size_t k = 0; k < length; ++k) f += static_cast<char>(payload[k % payload.size()] ^ "\x12\x34\x56\x78"[k % 4]);
+  return f;
+}
+
+TEST(ServerWebSocket, TheSameProtocolAndTheSameFramesAsTcp) {
+  // A headless session over each transport: the frames are the same bytes.
+  auto headless_frames = [](PalpateServer::Client& server, kj::WaitScope& ws) {
+    auto session = open_session(server, ws, true);
+    auto force = session.setForceRequest();
+    force.setNewtons(60.0);
+    force.send().wait(ws);
+    std::vector<std::vector<uint8_t>> frames;
+    for (int k = 0; k < 3; ++k) {
+      auto step = session.stepRequest();
+      step.setN(50);
+      step.initFields().setPositions(true);
+      frames.push_back(frame_bytes(step.send().wait(ws).getFrame()));
+    }
+    session.closeRequest().send().wait(ws);
+    return frames;
+  };
+  std::vector<std::vector<uint8_t>> over_tcp;
+  std::thread([&] {  // one event loop per thread: the TCP client in a thread of its own
+    Client tcp;
+    over_tcp = headless_frames(tcp.server, tcp.ws());
+  }).join();
+  WsClient w;
+  ASSERT_EQ(w.status, 101u);
+  EXPECT_EQ(w.server.versionRequest().send().wait(w.ws()).getProtocolVersion(), palpate::wire::PROTOCOL_VERSION);
+  const auto over_ws = headless_frames(w.server, w.ws());
+  ASSERT_EQ(over_tcp.size(), over_ws.size());
+  for (size_t k = 0; k < over_tcp.size(); ++k) EXPECT_EQ(over_tcp[k], over_ws[k]) << "frame " << k;
+  // Validation is the same: a NaN force is refused with the field's name.
+  auto req = w.server.openSessionRequest();
+  req.initRequest().getScene().setName("hertz_cube");
+  auto session = req.send().wait(w.ws()).getSession();
+  auto bad = session.setForceRequest();
+  bad.setNewtons(std::nan(""));
+  try {
+    bad.send().wait(w.ws());
+    ADD_FAILURE() << "a NaN force was accepted over WebSocket";
+  } catch (const kj::Exception& e) {
+    EXPECT_NE(std::string(e.getDescription().cStr()).find("setForce"), std::string::npos) << e.getDescription().cStr();
+  }
+}
+
+TEST(ServerWebSocket, OriginPathAndStaticFilesAreChecked) {
+  {  // another site's page may not open sessions
+    WsClient evil("http://evil.example");
+    EXPECT_EQ(evil.status, 403u);
+  }
+  {  // the server's own pages may
+    WsClient own("http://127.0.0.1:" + std::to_string(g_server->web_port()));
+    EXPECT_EQ(own.status, 101u);
+  }
+  RawSocket wrong_path;
+  wrong_path.send(upgrade_request("/other", ""));
+  EXPECT_NE(wrong_path.read_all(2000, true).find("404"), std::string::npos);
+  for (const char* path : {"/../../etc/passwd", "/%2e%2e/etc/passwd", "/viewer.js/..", "//etc/passwd"}) {
+    RawSocket s;
+    s.send(std::string("GET ") + path + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+    const std::string reply = s.read_all(2000, true);
+    EXPECT_EQ(reply.rfind("HTTP/1.1 404", 0), 0u) << path << ": " << reply.substr(0, 80);
+  }
+  RawSocket health;
+  health.send("GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+  EXPECT_EQ(health.read_all(2000, true).rfind("HTTP/1.1 200", 0), 0u);
+  RawSocket post;
+  post.send("POST / HTTP/1.1\r\nHost: x\r\nContent-Length: 3\r\nConnection: close\r\n\r\nabc");
+  EXPECT_EQ(post.read_all(2000, true).rfind("HTTP/1.1 405", 0), 0u);
+}
+
+TEST(ServerWebSocket, GarbageOversizedAndNeverReadingClientsCostOthersNothing) {
+  // A WebSocket client that subscribes to every tick's positions and never reads.
+  StalledSubscriber<WsClient> stalled;
+  // A full-rate subscriber over WebSocket, measured while the others misbehave.
+  WsClient c;
+  auto session = open_session(c.server, c.ws(), false);
+  auto sink_owner = kj::heap<RecordingSink>();
+  RecordingSink& sink = *sink_owner;
+  FrameSink::Client sink_cap = kj::mv(sink_owner);
+  auto sub = session.subscribeRequest();
+  sub.setSink(sink_cap);
+  sub.getOptions().setRateHz(0);
+  auto handle = sub.send().wait(c.ws()).getSubscription();
+
+  std::mt19937 rng(7);
+  auto junk = [&](size_t n) {
+    std::string s(n, '\0');
+    for (auto& b : s) b = static_cast<char>(rng());
+    return s;
+  };
+  std::vector<std::string> replies;
+  {  // garbage before any handshake
+    RawSocket s;
+    s.send(junk(4096));
+    replies.push_back(s.read_all(500));
+  }
+  {  // a handshake, then binary frames that are not capnp messages, then a text frame
+    RawSocket s;
+    s.send(upgrade_request("/rpc", ""));
+    s.send(client_frame(0x2, junk(64), 64));
+    s.send(client_frame(0x2, std::string(8, '\xff'), 8));  // an absurd segment count
+    s.send(client_frame(0x1, "hello", 5));
+    replies.push_back(s.read_all(500));
+  }
+  {  // an oversized message (2 MiB > the 1 MiB limit)
+    RawSocket s;
+    s.send(upgrade_request("/rpc", ""));
+    s.send(client_frame(0x2, junk(4096), 2u << 20));
+    replies.push_back(s.read_all(500));
+  }
+  {  // a frame header announcing 2^62 bytes, and nothing after it
+    RawSocket s;
+    s.send(upgrade_request("/rpc", ""));
+    std::string header = "\x82\xff";
+    header += std::string("\x40\0\0\0\0\0\0\0", 8);
+    s.send(header + "abcd");
+    replies.push_back(s.read_all(500));
+  }
+  sink.frames.clear();
+  c.pump(1500);
+  const double rate = session.statsRequest().send().wait(c.ws()).getStats().getAchievedRateHz();
+  stalled.release();
+  EXPECT_GT(rate, kMinRateHz);
+  EXPECT_GT(sink.frames.size(), kMinFullRateFrames) << "a WebSocket subscriber lost frames to misbehaving neighbours";
+  for (const auto& f : sink.frames) EXPECT_TRUE(f.finite);
+  EXPECT_TRUE(g_server->alive());
+  // The server still answers both transports.
+  uint32_t tcp_version = 0;
+  std::thread([&] {
+    Client tcp;
+    tcp_version = tcp.server.versionRequest().send().wait(tcp.ws()).getProtocolVersion();
+  }).join();
+  EXPECT_EQ(tcp_version, palpate::wire::PROTOCOL_VERSION);
+  uint32_t ws_version = 0;
+  std::thread([&] {
+    WsClient after;
+    ws_version = after.server.versionRequest().send().wait(after.ws()).getProtocolVersion();
+  }).join();
+  EXPECT_EQ(ws_version, palpate::wire::PROTOCOL_VERSION);
 }
 
 }  // namespace
