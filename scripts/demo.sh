@@ -18,13 +18,11 @@
 # from other machines), SECONDS_RUN (default 5), RAMP (default 100 N).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh
 BUILD_DIR=${BUILD_DIR:-build}
 SCENE=${SCENE:-hertz_cube_haptic}
 [[ -f scenes/$SCENE.json ]] || { echo "demo.sh: no scene scenes/$SCENE.json (SCENE is a name under scenes/)" >&2; exit 2; }
 echo "== building (Release) in $BUILD_DIR"
-cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
-cmake --build "$BUILD_DIR" -j"$(nproc)" >/dev/null
+BUILD_DIR=$BUILD_DIR BUILD_TYPE=Release scripts/build.sh >/dev/null
 
 if [[ "${1:-}" == "--verify" ]]; then
   shift

@@ -10,16 +10,15 @@
 #        $FUZZ_SECONDS (20) seconds from its seed corpus, and their regressions.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh
 if [ "${1:-}" != "--sanitize" ]; then
-  BUILD_DIR=${BUILD_DIR:-build}
-  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=${BUILD_TYPE:-Release} >/dev/null
-  cmake --build "$BUILD_DIR" -j"$(nproc)"
+  export BUILD_DIR=${BUILD_DIR:-build}
+  scripts/build.sh
   cd "$BUILD_DIR"
   ctest --output-on-failure -j"$(nproc)" "$@"
   exit
 fi
 
+scripts/setup.sh
 jobs=$(nproc)
 # -O1 -g1 (line tables), assertions on: half the compile time of RelWithDebInfo, file:line in reports.
 flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1")

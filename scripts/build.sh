@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Set-up and build: the Debian packages that are missing (scripts/setup.sh), then a
+# CMake build in $BUILD_DIR (default build) of type $BUILD_TYPE (default Release).
+# demo.sh, test.sh and the container image (deploy/Containerfile) build through it.
+#
+#   scripts/build.sh                      every target
+#   scripts/build.sh palpate-server ...   only these targets (and what they need)
+#
+# Environment: BUILD_DIR, BUILD_TYPE, JOBS (default: the number of cores), CMAKE_FLAGS
+# (more configure options, split at spaces: -DPALPATE_NATIVE=OFF for CPUs without AVX2).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/setup.sh >&2  # what it installs shows even when the build output is hidden
+BUILD_DIR=${BUILD_DIR:-build}
+read -ra flags <<< "${CMAKE_FLAGS:-}"
+cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" "${flags[@]}" >/dev/null
+targets=()
+for target in "$@"; do targets+=(--target "$target"); done
+cmake --build "$BUILD_DIR" -j"${JOBS:-$(nproc)}" "${targets[@]}"
