@@ -282,6 +282,11 @@ struct SessionInfo {
                                        # outside: the undeformed boundary surface (empty: none known)
   surfaceVertices @20 :List(UInt32);   # the particles surfaceTriangles references, each once, ascending:
                                        # the order of a frame's per-particle lists with FrameFields.surfaceOnly
+  referenceForces @21 :List(Float64);       # N: the stored finite-block reference of this scene (the one of
+                                            # the server's --scene-dir/references whose key matches), for a
+                                            # force-depth plot; empty when the server has none
+  referenceIndentation @22 :List(Float64);  # m, the converged indentation at each of referenceForces
+  referenceUncertainty @23 :List(Float64);  # m, its uncertainty
 }
 
 # ---------------------------------------------------------------------------

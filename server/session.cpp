@@ -261,6 +261,14 @@ class SessionImpl final : public wire::Session::Server {
     for (unsigned k = 0; k < triangles.size(); ++k) triangles.set(k, static_cast<uint32_t>(t[k]));
     auto vertices = info.initSurfaceVertices(static_cast<unsigned>(surface_vertices_.size()));
     for (unsigned k = 0; k < vertices.size(); ++k) vertices.set(k, surface_vertices_[k]);
+    if (const auto& ref = sim_->reference()) {
+      auto copy = [](const std::vector<double>& from, capnp::List<double>::Builder to) {
+        for (unsigned k = 0; k < to.size(); ++k) to.set(k, from[k]);
+      };
+      copy(ref->forces, info.initReferenceForces(static_cast<unsigned>(ref->forces.size())));
+      copy(ref->indentation, info.initReferenceIndentation(static_cast<unsigned>(ref->indentation.size())));
+      copy(ref->uncertainty, info.initReferenceUncertainty(static_cast<unsigned>(ref->uncertainty.size())));
+    }
     info.setTouchHeight(m.touch_height);
     info.setRadius(m.indenter_radius);
     info.setYoungModulus(s.material.young_modulus);

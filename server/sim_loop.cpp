@@ -205,6 +205,14 @@ void Simulation::prepare_and_build() {
   frames_writer_ = std::move(frames.writer);
   frames_reader_ = std::move(frames.reader);
   build_seconds_ = (now_ns() - t0) * 1e-9;
+  check_cancelled();
+  if (!config_.reference_dir.empty()) {
+    try {
+      reference_ = find_reference(scene_, config_.reference_dir);
+    } catch (const std::exception& e) {  // a reference is a display aid: never fails a session
+      spdlog::warn("stored references in {}: {}", config_.reference_dir.string(), e.what());
+    }
+  }
 }
 
 void Simulation::run() {

@@ -14,7 +14,9 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
+#include <optional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -23,6 +25,7 @@
 
 #include "core/checkpoint.h"
 #include "core/model.h"
+#include "core/reference_file.h"
 #include "core/options.h"
 #include "core/scene.h"
 #include "core/state.h"
@@ -65,6 +68,10 @@ struct SimConfig {
   // Compute the contact stiffness of the frames' local models (StiffnessSource): on a
   // worker thread in real time, at each publish when headless. Off: stiffness zero.
   bool contact_stiffness = true;
+  // Where the stored finite-block references are (palpate-reference --out): the one whose
+  // key matches the session's scene is read on the session's thread at its start and
+  // given to clients (SessionInfo.reference*). Empty: none looked up.
+  std::filesystem::path reference_dir;
   // TEST HOOK (tests/server_simulation_test.cpp only; empty in the server): called on
   // the session's thread with the state just before each step, e.g. to inject a NaN.
   std::function<void(State&)> before_step_for_tests;
@@ -132,6 +139,9 @@ class Simulation {
   // The options the loop started with (the scene's), and the coupling in effect at the
   // start (default_coupling, or the request's clamped): after phase() == ready only.
   const Options& initial_options() const { return initial_options_; }
+  // The stored reference of the scene (SimConfig::reference_dir), if there is one: after
+  // phase() == ready only.
+  const std::optional<Reference>& reference() const { return reference_; }
   CouplingOptions initial_coupling() const { return initial_coupling_; }
 
   // RPC thread. Returns the command's sequence number (> 0), or 0 when the queue
@@ -187,6 +197,7 @@ class Simulation {
   Scene scene_;
   std::unique_ptr<Model> model_;
   double build_seconds_ = 0.0;
+  std::optional<Reference> reference_;
   Options initial_options_;
   CouplingOptions initial_coupling_;
 
