@@ -407,6 +407,10 @@ struct Stats {
   realtimePriority @12 :Bool;     # SCHED_FIFO granted to the loop thread
   spinMarginUs @13 :Float64;      # the loop sleeps until this long before a deadline, then spins
   stiffnessEvaluations @14 :UInt64;  # contact stiffnesses computed for the local models (docs/protocol.md)
+  missesLateStart @15 :UInt64;    # of deadlineMisses: the tick started over half a period late (the host
+                                  # did not run the loop in time)
+  missesLongStep @16 :UInt64;     # of deadlineMisses: the tick started in time and its work overran
+  pinned @17 :Bool;               # the loop runs on a core of its own (palpate-server pins unless --no-pin)
 }
 
 enum RunState {

@@ -40,6 +40,10 @@ struct ServerContext {
   kj::Promise<void> close_all(const char* reason);
   void add_task(kj::Promise<void> task) { tasks_.add(kj::mv(task)); }
 
+  // The core a new session's real-time loop pins itself to: 1 ... n-1 in turn (-1: headless,
+  // --no-pin, or a single core).
+  int next_loop_cpu(bool headless);
+
   // /healthz (server/web.h): healthy while every running real-time session held, since
   // the previous probe, at least min_rate_fraction of its rate with at most
   // max_miss_fraction of its ticks missing their deadline (paused and headless sessions
@@ -65,7 +69,8 @@ struct ServerContext {
     double elapsed_s = 0.0;
     uint64_t deadline_misses = 0;
   };
-  std::map<uint32_t, HealthSample> health_samples_;  // by session id, at the previous probe
+  std::map<uint32_t, HealthSample> health_samples_;
+  int next_loop_core_ = 0;  // by session id, at the previous probe
   std::set<Closing*> closing_;  // declared before tasks_: a Closing (held by a task) erases itself
   kj::TaskSet tasks_{error_handler_};
 };

@@ -62,6 +62,10 @@ struct SimConfig {
   double rate_hz = 1000.0;
   double spin_margin_us = 200.0;  // sleep until this long before the deadline, then spin
   bool try_realtime = true;       // ask for SCHED_FIFO (silently refused when not allowed)
+  // The core the real-time loop pins itself to (-1: none). The server gives each real-time
+  // session one of cores 1 ... n-1 in turn and keeps the RPC thread, the stiffness workers
+  // and headless sessions on the others (palpate-server --no-pin turns it off).
+  int cpu = -1;
   int checkpoint_interval = 100;  // ticks between checkpoints of the last good state
   DeviceLimits device;            // OpenRequest.device
   CouplingOptions coupling;       // OpenRequest.coupling; stiffness 0 = default_coupling()
@@ -94,8 +98,12 @@ struct SimCounters {
   double elapsed_s = 0.0;
   double stepping_s = 0.0;  // wall time spent inside step() (headless rate)
   uint64_t deadline_misses = 0, skipped_ticks = 0, frames_published = 0, frames_coalesced = 0;
+  // The misses by cause: the tick started over half a period late (the host did not run the
+  // thread in time), or it started in time and its step overran.
+  uint64_t misses_late_start = 0, misses_long_step = 0;
   uint32_t blow_ups = 0;
   bool realtime_priority = false;
+  bool pinned = false;  // the loop runs on SimConfig::cpu only
   uint64_t stiffness_evaluations = 0;
   Histogram::Summary step_us, lateness_us;
 };
@@ -240,8 +248,9 @@ class Simulation {
   std::atomic<int64_t> start_ns_{0}, last_tick_ns_{0};
   std::atomic<int64_t> stepping_ns_{0};
   std::atomic<uint64_t> deadline_misses_{0}, skipped_ticks_{0}, frames_published_{0}, frames_coalesced_{0};
+  std::atomic<uint64_t> misses_late_start_{0}, misses_long_step_{0};
   std::atomic<uint32_t> blow_ups_{0};
-  std::atomic<bool> realtime_priority_{false};
+  std::atomic<bool> realtime_priority_{false}, pinned_{false};
   std::atomic<uint64_t> stiffness_evaluations_{0};  // copied from stiffness_ at each publish
   std::atomic<bool> paused_flag_{false};
   std::atomic<int64_t> status_tick_{0};
