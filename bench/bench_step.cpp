@@ -216,7 +216,7 @@ int main(int argc, char** argv) {
   nlohmann::json j;
   j["scene"] = model.name;
   j["model"] = is_mls ? "mls" : "hex_fem";
-  j["law"] = to_string(model.law);
+  j["law"] = is_mls ? nlohmann::json(to_string(model.law)) : nlohmann::json(nullptr);
   j["particles"] = n;
   j["fixed_particles"] = model.fixed_count;
   j["neighbor_pairs"] = nnz;
