@@ -23,16 +23,17 @@
 #include <kj/compat/http.h>
 
 #include "protocol/palpate.capnp.h"
+#include "tests/e2e/open_session.h"
 #include "tests/e2e/server_process.h"
 #include "tests/run_program.h"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
+using palpate::test::open_session;
 using palpate::test::ServerProcess;
 using palpate::wire::FrameSink;
 using palpate::wire::PalpateServer;
-using palpate::wire::Session;
 
 struct SidecarCall {
   std::string method, path, body, content_type;
@@ -216,16 +217,7 @@ TEST(AgonesE2E, ReadyRetriedThenHealthWhileTheRateHoldsAndShutdownAfterTheSessio
 
   // 2. A session that holds its rate (coarse cube, 100 Hz) keeps the pings going; its
   // subscriber is told when the server shuts down.
-  auto open = [&](std::vector<std::string> overrides, double rate_hz) {
-    auto req = main.openSessionRequest();
-    auto r = req.initRequest();
-    r.getScene().setName("hertz_cube");
-    auto o = r.initOverrides(static_cast<unsigned>(overrides.size()));
-    for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
-    r.setRateHz(rate_hz);
-    return req.send().wait(ws).getSession();
-  };
-  auto light = open({"body.distribution.per_edge=8"}, 100.0);
+  auto light = open_session(main, ws, false, {"body.distribution.per_edge=8"}, 100.0);
   auto sink_owner = kj::heap<DoneSink>();
   DoneSink& sink = *sink_owner;
   FrameSink::Client sink_cap = kj::mv(sink_owner);  // held here: it outlives the server's reference
@@ -240,7 +232,7 @@ TEST(AgonesE2E, ReadyRetriedThenHealthWhileTheRateHoldsAndShutdownAfterTheSessio
 
   // 3. A session that cannot hold its rate (the 5832-particle cube, 0.5 ms per RK4 step,
   // asked for 10 kHz): the pings stop.
-  auto heavy = open({}, 10000.0);
+  auto heavy = open_session(main, ws, false, {}, 10000.0);
   const Clock::time_point heavy_open = Clock::now();
   pump(2500ms);
   EXPECT_EQ(pings_between(sidecar.calls(), heavy_open + 600ms, heavy_open + 2500ms), 0)

@@ -38,6 +38,7 @@
 #include <kj/timer.h>
 
 #include "protocol/palpate.capnp.h"
+#include "tests/e2e/open_session.h"
 #include "tests/e2e/server_process.h"
 #include "tests/run_program.h"
 
@@ -130,17 +131,7 @@ class RecordingSink final : public FrameSink::Server {
   }
 };
 
-// hertz_cube with overrides ("key=value"), over either transport.
-Session::Client open_session(PalpateServer::Client& server, kj::WaitScope& ws, bool headless,
-                             const std::vector<std::string>& overrides = {"body.distribution.per_edge=8"}) {
-  auto req = server.openSessionRequest();
-  auto r = req.initRequest();
-  r.getScene().setName("hertz_cube");
-  auto o = r.initOverrides(static_cast<unsigned>(overrides.size()));
-  for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
-  r.setHeadless(headless);
-  return req.send().wait(ws).getSession();
-}
+using palpate::test::open_session;
 
 // A client in a thread of its own that opens a real-time session, subscribes to every
 // tick's positions and then never reads (its thread stops running its event loop) until
