@@ -8,6 +8,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -144,6 +145,26 @@ unsigned free_port() {
   return ntohs(addr.sin_port);
 }
 
+// The status code of GET /healthz on the web port ("" when there is no answer).
+std::string healthz_status(int port) {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  std::string reply;
+  if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0) {
+    const std::string request = "GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n";
+    if (send(fd, request.data(), request.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(request.size())) {
+      char buf[512];
+      ssize_t n = 0;
+      while (reply.size() < 12 && (n = recv(fd, buf, sizeof buf, 0)) > 0) reply.append(buf, static_cast<size_t>(n));
+    }
+  }
+  close(fd);
+  return reply.size() >= 12 ? reply.substr(9, 3) : "";  // "HTTP/1.1 503 ..."
+}
+
 class DoneSink final : public FrameSink::Server {
  public:
   size_t frames = 0;
@@ -180,7 +201,7 @@ TEST(AgonesE2E, ReadyRetriedThenHealthWhileTheRateHoldsAndShutdownAfterTheSessio
   // The server first, the sidecar a second later: /ready must be retried until it listens.
   const unsigned port = free_port();
   ServerProcess server({"--agones", "--agones-port", std::to_string(port), "--agones-health-seconds",
-                        std::to_string(kPeriodS), "--no-realtime", "--log-level", "info"});
+                        std::to_string(kPeriodS), "--http", "127.0.0.1:0", "--no-realtime", "--log-level", "info"});
   const Clock::time_point t0 = server.started();
   std::this_thread::sleep_for(1s);
   FakeSidecar sidecar(port);
@@ -231,12 +252,27 @@ TEST(AgonesE2E, ReadyRetriedThenHealthWhileTheRateHoldsAndShutdownAfterTheSessio
       << "a session at its rate stopped the pings";
 
   // 3. A session that cannot hold its rate (the 5832-particle cube, 0.5 ms per RK4 step,
-  // asked for 10 kHz): the pings stop.
+  // asked for 10 kHz): the pings stop. Meanwhile /healthz is asked every 50 ms: it makes
+  // the same judgement over intervals of its own, reports the failure, and its frequent
+  // probes do not make the pinger's judgement pass.
   auto heavy = open_session(main, ws, false, {}, 10000.0);
   const Clock::time_point heavy_open = Clock::now();
+  std::atomic<bool> stop_probing{false};
+  std::atomic<int> healthz_503{0}, healthz_other{0};
+  std::thread probing([&] {
+    while (!stop_probing) {
+      const std::string status = healthz_status(server.web_port());
+      ++(status == "503" ? healthz_503 : healthz_other);
+      std::this_thread::sleep_for(50ms);
+    }
+  });
   pump(2500ms);
+  stop_probing = true;
+  probing.join();
   EXPECT_EQ(pings_between(sidecar.calls(), heavy_open + 600ms, heavy_open + 2500ms), 0)
       << "pings went on while a session missed its rate";
+  EXPECT_GT(healthz_503.load(), 10) << "/healthz did not report the session missing its rate (" << healthz_other
+                                    << " other answers)";
   const double heavy_rate = heavy.statsRequest().send().wait(ws).getStats().getAchievedRateHz();
   EXPECT_LT(heavy_rate, 9000.0) << "the heavy session held 10 kHz: the test proves nothing";
 
