@@ -26,12 +26,6 @@ double family_first_spacing(double L, int base_per_edge, double base_first_spaci
   return std::abs(r - 1.0) < 1e-12 ? L / n : L * (r - 1.0) / (std::pow(r, n) - 1.0);
 }
 
-std::string vec_text(const Vec3& v) {
-  std::ostringstream o;
-  o.precision(12);
-  o << "[" << v[0] << "," << v[1] << "," << v[2] << "]";
-  return o.str();
-}
 
 std::string number_text(double v) {
   std::ostringstream o;
@@ -40,20 +34,9 @@ std::string number_text(double v) {
   return o.str();
 }
 
-Eigen::Vector2d top_face_centre(const Scene& scene) {
-  return 0.5 * (scene.box.min.head<2>() + scene.box.max.head<2>());
-}
-
-bool at_top_face_centre(const Scene& scene, const Eigen::Vector2d& site) {
-  const double edge = (scene.box.max - scene.box.min).head<2>().maxCoeff();
-  return (site - top_face_centre(scene)).cwiseAbs().maxCoeff() <= 1e-9 * edge;
-}
 
 }  // namespace
 
-Eigen::Vector2d indenter_site(const Scene& scene) {
-  return scene.indenter.position_given ? Eigen::Vector2d(scene.indenter.position.head<2>()) : top_face_centre(scene);
-}
 
 void check_site(const Scene& scene, const std::string& field) {
   // A mesh body without a box has no top face to check against: any (x, y) over the body is
@@ -114,33 +97,6 @@ double indentation_at_tool(const Model& model, const State& state) {
   return touch_height_at(model, c[0], c[1]) - c[2];  // (4.1), (2.5) at the tool's (x, y)
 }
 
-std::string reference_key(const Scene& scene) {
-  std::ostringstream o;
-  o.precision(12);
-  o << "box=" << vec_text(scene.box.min) << vec_text(scene.box.max) << " E=" << scene.material.young_modulus
-    << " nu=" << scene.material.poisson_ratio;
-  // A heterogeneous body is another problem (a homogeneous body's key is unchanged).
-  for (const InclusionSpec& inc : scene.material.inclusions) {
-    if (inc.shape == InclusionShape::group)
-      o << " group=" << inc.group;
-    else if (inc.shape == InclusionShape::sphere)
-      o << " sphere=" << vec_text(inc.center) << inc.radius;
-    else
-      o << " inclusion_box=" << vec_text(inc.min) << vec_text(inc.max);
-    o << ",E=" << inc.young_modulus << ",nu=" << inc.poisson_ratio;
-  }
-  o << " fixed=" << scene.fixed_faces;
-  for (const FixedRegion& f : scene.fixed_regions)  // (none in the stored references: their keys stay)
-    o << "+" << static_cast<int>(f.kind) << ":" << f.group << vec_text(f.point) << vec_text(f.normal) << f.tolerance
-      << vec_text(f.min) << vec_text(f.max) << vec_text(f.center) << f.radius;
-  o << " R=" << scene.indenter.radius << " site=";
-  const Eigen::Vector2d site = indenter_site(scene);
-  if (at_top_face_centre(scene, site))
-    o << "centre";
-  else
-    o << "[" << site[0] << "," << site[1] << "]";
-  return o.str();
-}
 
 bool richardson(const double h[3], const double d[3], double& extrapolated, double& order) {
   extrapolated = d[2];
@@ -329,48 +285,9 @@ Reference large_strain_reference(const Scene& scene, const std::vector<double>& 
   return ref;
 }
 
-std::string large_strain_reference_key(const Scene& scene) {
-  return reference_key(scene) + " law=neo_hookean held";
-}
 
-double reference_indentation(const Reference& ref, double force) {
-  const auto& F = ref.forces;
-  for (size_t k = 0; k < F.size(); ++k)
-    if (std::abs(F[k] - force) <= 1e-9 * std::max(1.0, std::abs(force))) return ref.indentation[k];
-  // Piecewise linear in d^(3/2) against F (exact for a Hertzian curve), inside the range.
-  for (size_t k = 0; k + 1 < F.size(); ++k) {
-    const double lo = std::min(F[k], F[k + 1]), hi = std::max(F[k], F[k + 1]);
-    if (force < lo || force > hi) continue;
-    const double t = (force - F[k]) / (F[k + 1] - F[k]);
-    const double a = std::pow(ref.indentation[k], 1.5), b = std::pow(ref.indentation[k + 1], 1.5);
-    return std::pow(a + t * (b - a), 2.0 / 3.0);
-  }
-  return NAN;
-}
 
-Reference load_reference(const std::filesystem::path& file) {
-  std::ifstream in(file);
-  if (!in) throw std::runtime_error("cannot read " + file.string());
-  std::stringstream text;
-  text << in.rdbuf();
-  return reference_from_json(text.str());
-}
 
-std::optional<Reference> find_reference(const Scene& scene, const std::filesystem::path& folder) {
-  std::error_code ec;
-  if (!std::filesystem::is_directory(folder, ec)) return std::nullopt;
-  const std::string key = reference_key(scene);
-  for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
-    if (entry.path().extension() != ".json") continue;
-    try {
-      Reference ref = load_reference(entry.path());
-      if (ref.key == key) return ref;
-    } catch (const std::runtime_error&) {
-      continue;  // not a reference file
-    }
-  }
-  return std::nullopt;
-}
 
 std::string reference_to_json(const Reference& ref) {
   nlohmann::json j;
@@ -392,31 +309,5 @@ std::string reference_to_json(const Reference& ref) {
   return j.dump(1);
 }
 
-Reference reference_from_json(const std::string& text) {
-  Reference ref;
-  try {
-    const nlohmann::json j = nlohmann::json::parse(text);
-    ref.key = j.at("key").get<std::string>();
-    ref.forces = j.at("forces").get<std::vector<double>>();
-    ref.indentation = j.at("indentation").get<std::vector<double>>();
-    ref.uncertainty = j.at("uncertainty").get<std::vector<double>>();
-    ref.order = j.at("order").get<std::vector<double>>();
-    for (const auto& l : j.at("levels")) {
-      ReferenceLevel level;
-      level.per_edge = l.at("per_edge").get<int>();
-      level.nodes = l.at("nodes").get<int>();
-      level.first_spacing = l.at("first_spacing").get<double>();
-      level.indentation = l.at("indentation").get<std::vector<double>>();
-      level.seconds = l.at("seconds").get<double>();
-      if (l.contains("forces")) level.forces = l.at("forces").get<std::vector<double>>();
-      ref.levels.push_back(std::move(level));
-    }
-  } catch (const nlohmann::json::exception& e) {
-    throw std::runtime_error(std::string("not a palpate reference: ") + e.what());
-  }
-  if (ref.indentation.size() != ref.forces.size() || ref.uncertainty.size() != ref.forces.size())
-    throw std::runtime_error("not a palpate reference: the lists differ in length");
-  return ref;
-}
 
 }  // namespace palpate

@@ -23,21 +23,12 @@
 #include <vector>
 
 #include "core/model.h"
+#include "core/reference_file.h"
 #include "core/scene.h"
 #include "core/state.h"
 
 namespace palpate {
 
-// ---------------------------------------------------------------------------
-// The site of an indentation (docs/physics.md §4, "Off-centre sites"): the point (x, y)
-// of the top face over which the tool presses. It is the scene's indenter.position
-// (x, y), or the centre of the top face when the scene gives none; palpate-verify and
-// palpate-reference --site X,Y set that same field (place_indenter_at_site), so the
-// model's start, the touch height, the static solve's candidates, the reference's
-// lattice focus and its key all follow one value.
-
-// The site of a scene: indenter.position's (x, y), else the centre of the box's top face.
-Eigen::Vector2d indenter_site(const Scene& scene);
 
 // Refuses (std::invalid_argument, "FIELD: ...") a site off the top face, or closer to a
 // side wall than the indenter radius R, (4.2) (the footprint within which the touch height is
@@ -74,28 +65,7 @@ struct ReferenceOptions {
   double base_first_spacing = 0.0;
 };
 
-struct ReferenceLevel {
-  int per_edge = 0;
-  int nodes = 0;
-  double first_spacing = 0.0;      // m
-  std::vector<double> indentation; // per force, m
-  std::vector<double> forces;      // the large-strain reference: the force at each depth, N (else empty)
-  double seconds = 0.0;            // wall time of the level (assembly, factorisation, sweep)
-};
 
-struct Reference {
-  std::vector<double> forces;        // N
-  std::vector<ReferenceLevel> levels;
-  std::vector<double> indentation;   // d*(F), extrapolated, m
-  std::vector<double> uncertainty;   // m
-  std::vector<double> order;         // observed convergence order p per force
-  std::string key;                   // what the reference depends on (reference_key)
-};
-
-// The scene fields the reference depends on, as one line (box, material, fixed faces,
-// indenter radius and site); two scenes with the same key share a reference. The site is
-// "centre" for the centre of the top face (given or not), else "[x,y]".
-std::string reference_key(const Scene& scene);
 
 // Computes the reference at `forces` for the scene's site (indenter_site): every level's
 // lattice is graded toward the site, with a node on it, and its contact candidates are
@@ -114,26 +84,15 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
 Reference large_strain_reference(const Scene& scene, const std::vector<double>& depths,
                                  const std::vector<int>& levels = {17, 21, 25, 29},
                                  const std::function<void(const std::string&)>& progress = {});
-std::string large_strain_reference_key(const Scene& scene);
 
-// d*(F) at an arbitrary force in the reference's range: d^(3/2) interpolated linearly
-// in F (Hertz: F ~ d^(3/2)), exact at the reference forces. NaN outside the range.
-double reference_indentation(const Reference& reference, double force);
 
 // Extrapolates d(h) = d* + C h^p from three (h, d) pairs, h decreasing. Returns
 // false (and d* = the finest value, p = 0) when the differences do not converge
 // monotonically.
 bool richardson(const double h[3], const double d[3], double& extrapolated, double& order);
 
-// A reference file written by palpate-reference --out (throws std::runtime_error).
-Reference load_reference(const std::filesystem::path& file);
 
-// The stored reference in `folder` (*.json written by palpate-reference --out) whose
-// key matches the scene's; nullopt when there is none.
-std::optional<Reference> find_reference(const Scene& scene, const std::filesystem::path& folder);
-
-// JSON text of a reference, and back (throws std::runtime_error naming the problem).
+// JSON text of a reference (read back by reference_from_json, core/reference_file.h).
 std::string reference_to_json(const Reference& reference);
-Reference reference_from_json(const std::string& text);
 
 }  // namespace palpate

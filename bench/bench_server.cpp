@@ -156,6 +156,16 @@ class Recorder final : public FrameSink::Server {
 };
 
 // Resident memory of a process, MB (VmRSS); NaN if unknown.
+// CPU time the hypervisor gave other guests while this one wanted it ("steal", the
+// eighth field of /proc/stat's cpu line), all cores, in seconds since boot; NaN if unknown.
+double host_steal_seconds() {
+  std::ifstream f("/proc/stat");
+  std::string cpu;
+  unsigned long long user, nice, system, idle, iowait, irq, softirq, steal;
+  if (!(f >> cpu >> user >> nice >> system >> idle >> iowait >> irq >> softirq >> steal) || cpu != "cpu") return NAN;
+  return static_cast<double>(steal) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
 double rss_mb(pid_t pid) {
   std::ifstream status("/proc/" + std::to_string(pid) + "/status");
   std::string key;
@@ -377,6 +387,7 @@ int main(int argc, char** argv) {
     for (auto& s : sessions) window_start.push_back(window_counts(s));
     const int64_t ticks0 = window_start[0].ticks;
     const double elapsed0 = window_start[0].elapsed_s;
+    const double steal0 = host_steal_seconds();
     std::map<uint64_t, Clock::time_point> sent;
     const auto start = Clock::now();
     for (int k = 0; std::chrono::duration<double>(Clock::now() - start).count() < a.seconds; ++k) {
@@ -439,6 +450,7 @@ int main(int argc, char** argv) {
     const double window_s = stats.getElapsedSeconds() - elapsed0;
     const double rate = window_s > 0 ? (stats.getTicks() - ticks0) / window_s : 0.0;
     const double misses = static_cast<double>(stats.getDeadlineMisses());
+    const double host_steal = host_steal_seconds() - steal0;
     const double miss_ratio = stats.getTicks() > 0 ? misses / static_cast<double>(stats.getTicks()) : 0.0;
 
     std::vector<uint64_t> dropped, received;
@@ -478,7 +490,8 @@ int main(int argc, char** argv) {
           "{\"scene\": \"%s\", \"particles\": %u, \"seconds\": %.1f, \"target_rate_hz\": %.1f, \"rate_hz\": %.2f, "
           "\"ticks\": %lld, \"step_p50_us\": %.1f, \"step_p99_us\": %.1f, \"step_max_us\": %.1f, "
           "\"lateness_p50_us\": %.1f, \"lateness_p99_us\": %.1f, \"lateness_max_us\": %.1f, "
-          "\"deadline_misses\": %llu, \"deadline_miss_ratio\": %.6f, \"skipped_ticks\": %llu, "
+          "\"deadline_misses\": %llu, \"deadline_miss_ratio\": %.6f, \"misses_late_start\": %llu, "
+          "\"misses_long_step\": %llu, \"host_steal_s\": %s, \"pinned\": %s, \"skipped_ticks\": %llu, "
           "\"latency_p50_ms\": %.3f, \"latency_p99_ms\": %.3f, \"latency_max_ms\": %.3f, \"commands\": %zu, "
           "\"full_rate_frames\": %llu, \"full_rate_dropped\": %llu, \"dropped_frames\": %s, "
           "\"viewer_frames\": %s, \"blow_ups\": %u, \"realtime_priority\": %s, \"client_fifo\": %s, "
@@ -486,7 +499,9 @@ int main(int argc, char** argv) {
           a.scene.c_str(), particles, a.seconds, stats.getTargetRateHz(), rate,
           static_cast<long long>(stats.getTicks()), step.getP50(), step.getP99(), step.getMax(), late.getP50(),
           late.getP99(), late.getMax(), static_cast<unsigned long long>(stats.getDeadlineMisses()), miss_ratio,
-          static_cast<unsigned long long>(stats.getSkippedTicks()), percentile(latency_ms, 0.5),
+          static_cast<unsigned long long>(stats.getMissesLateStart()),
+          static_cast<unsigned long long>(stats.getMissesLongStep()), number(host_steal).c_str(),
+          stats.getPinned() ? "true" : "false", static_cast<unsigned long long>(stats.getSkippedTicks()), percentile(latency_ms, 0.5),
           percentile(latency_ms, 0.99), percentile(latency_ms, 1.0), latency_ms.size(),
           static_cast<unsigned long long>(recorder.frames), static_cast<unsigned long long>(full_rate_dropped),
           list(dropped).c_str(), list(received).c_str(), stats.getBlowUps(),
@@ -501,9 +516,12 @@ int main(int argc, char** argv) {
                   step.getMax());
       std::printf("tick lateness     p50 %.0f us, p99 %.0f us, max %.0f us\n", late.getP50(), late.getP99(),
                   late.getMax());
-      std::printf("deadline misses   %llu (%.3f %%), %llu ticks skipped\n",
+      std::printf("deadline misses   %llu (%.3f %%): %llu started late, %llu steps overran; %llu ticks skipped%s\n",
                   static_cast<unsigned long long>(stats.getDeadlineMisses()), 100.0 * miss_ratio,
-                  static_cast<unsigned long long>(stats.getSkippedTicks()));
+                  static_cast<unsigned long long>(stats.getMissesLateStart()),
+                  static_cast<unsigned long long>(stats.getMissesLongStep()),
+                  static_cast<unsigned long long>(stats.getSkippedTicks()), stats.getPinned() ? ", loop pinned" : "");
+      std::printf("host steal        %.3f s of CPU taken by the hypervisor during the run (all cores)\n", host_steal);
       std::printf("command->stream   p50 %.2f ms, p99 %.2f ms, max %.2f ms (%zu commands)\n",
                   percentile(latency_ms, 0.5), percentile(latency_ms, 0.99), percentile(latency_ms, 1.0),
                   latency_ms.size());

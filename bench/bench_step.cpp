@@ -1,7 +1,9 @@
 // palpate-bench-step: single-thread timings of the simulation's hot paths on a
 // scene with the indenter pressed into the body (contact active):
 //   one internal-force evaluation, one RK4 step, one symplectic-Euler step and one
-//   linearly implicit Euler step (step() with the scene's other settings).
+//   linearly implicit Euler step (step() with the scene's other settings);
+//   and, in the same run, the core's FMA peak (bench/fma_peak.h), of which the force
+//   evaluation's GFLOP/s (flops counted per law, mls_internal_forces_flops) is a fraction.
 // Every timed call starts from the same pressed state (restored, untimed, before
 // each repetition), so every repetition does the same work; the figures are the
 // medians over the repetitions (std::chrono::steady_clock).
@@ -17,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/fma_peak.h"
 #include "cli/arguments.h"
 #include "tools/load_scene.h"
 #include "core/checkpoint.h"
@@ -172,6 +175,8 @@ int main(int argc, char** argv) {
   ops[health] = {[&] { restore(); free_motion_symplectic_euler(model, se_opt, timed); check(solve_contact(model, se_opt, timed)); },
                  [&] { (void)check_health(model, se_opt, timed, StepStatus::ok); }, repeats, {}};
   for (Op& op : ops) op.ms.reserve(op.repeats);
+  // The peak before and after the timed operations; the larger counts (a disturbance only slows).
+  bench::FmaPeak peak = bench::measure_fma_peak();
   for (int r = 0; r < std::max(repeats, ie_repeats); ++r)
     for (Op& op : ops) {
       if (r >= op.repeats) continue;
@@ -181,11 +186,15 @@ int main(int argc, char** argv) {
       const auto t1 = Clock::now();
       op.ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
     }
+  {
+    const bench::FmaPeak after = bench::measure_fma_peak();
+    peak.double_gflops = std::max(peak.double_gflops, after.double_gflops);
+    peak.single_gflops = std::max(peak.single_gflops, after.single_gflops);
+  }
   auto med = [&](int k) { return median(ops[k].ms); };
-  // Counted for the MLS solid with the St Venant-Kirchhoff law only (the other laws' per-particle
-  // arithmetic, the polar iteration above all, is data dependent).
-  const bool flops_counted = is_mls && model.law == MaterialLaw::stvk;
-  const double flops = flops_counted ? mls_internal_forces_flops(model) : 0.0;
+  // Counted for the MLS solid, every law (the corotational polar iterations at the timed positions).
+  const bool flops_counted = is_mls;
+  const double flops = flops_counted ? mls_internal_forces_flops(model, start_position) : 0.0;
   const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
                rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
                ie_ms = med(ie_step), ie_free_ms = med(ie_free), health_ms = med(health);
@@ -202,9 +211,12 @@ int main(int argc, char** argv) {
   const int ie_contacts = static_cast<int>(timed.contact_index.size());
 
   const double gflops = flops / (force_eval_ms * 1e6);
+  const double fraction_of_peak = peak.double_gflops > 0 ? gflops / peak.double_gflops : NAN;
+  const double ns_per_pair = nnz > 0 ? force_eval_ms * 1e6 / nnz : NAN;
   nlohmann::json j;
   j["scene"] = model.name;
   j["model"] = is_mls ? "mls" : "hex_fem";
+  j["law"] = is_mls ? nlohmann::json(to_string(model.law)) : nlohmann::json(nullptr);
   j["particles"] = n;
   j["fixed_particles"] = model.fixed_count;
   j["neighbor_pairs"] = nnz;
@@ -215,6 +227,10 @@ int main(int argc, char** argv) {
   j["force_eval_ms"] = force_eval_ms;
   j["force_eval_flops"] = flops_counted ? nlohmann::json(flops) : nlohmann::json(nullptr);
   j["force_eval_gflops"] = flops_counted ? nlohmann::json(gflops) : nlohmann::json(nullptr);
+  j["force_eval_fraction_of_peak"] = flops_counted && peak.double_gflops > 0 ? nlohmann::json(fraction_of_peak) : nlohmann::json(nullptr);
+  j["force_eval_ns_per_pair"] = nnz > 0 ? nlohmann::json(ns_per_pair) : nlohmann::json(nullptr);
+  j["peak_double_gflops"] = peak.double_gflops;
+  j["peak_single_gflops"] = peak.single_gflops;
   j["force_differential_ms"] = tangent_ms;
   j["rk4_step_ms"] = rk4_ms;
   j["rk4_step_contacts"] = rk4_contacts;
@@ -255,8 +271,12 @@ int main(int argc, char** argv) {
                 model.name.c_str(), n, model.fixed_count, nnz, double(nnz) / n);
     std::printf("pressed in with %g N for %d RK4 steps: %d particles in contact\n", press_force, pressing, contacts);
     std::printf("medians of %d repetitions (implicit Euler: %d), single thread\n\n", repeats, ie_repeats);
+    std::printf("FMA peak of one core (AVX2, measured in this run): %.1f GFLOP/s double, %.1f GFLOP/s single\n\n",
+                peak.double_gflops, peak.single_gflops);
     if (flops_counted)
-      std::printf("  %-34s %10.4f ms   %.2f GFLOP/s (%.3g flop)\n", "mls_internal_forces", force_eval_ms, gflops, flops);
+      std::printf("  %-34s %10.4f ms   %.2f GFLOP/s (%.3g flop, %s law), %.0f %% of the double peak, %.2f ns per pair\n",
+                  "mls_internal_forces", force_eval_ms, gflops, flops, to_string(model.law),
+                  100 * fraction_of_peak, ns_per_pair);
     else
       std::printf("  %-34s %10.4f ms\n", "mls_internal_forces", force_eval_ms);
     std::printf("  %-34s %10.4f ms\n", "mls_force_differential (K dx)", tangent_ms);

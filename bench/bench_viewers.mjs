@@ -1,4 +1,4 @@
-// palpate-bench-viewers: what browser viewers cost, in one run (issue #15). Starts
+// bench/bench_viewers.mjs: what browser viewers cost, in one run (issue #15). Starts
 // palpate-server --http and a headless Chromium (tests/browser/cdp.mjs), then, each phase
 // on a fresh real-time session pressed with the same force, for --seconds each:
 //   none  a page that opens the session and does not subscribe (the loop alone),
@@ -81,7 +81,7 @@ let status = 0;
 try {
   for (const [name, viewers] of [["none", 0], ["one", 1], ["four", 4]]) results.phases.push(await phase(name, viewers));
 } catch (error) {
-  console.error(`palpate-bench-viewers: ${error.message}`);
+  console.error(`bench_viewers.mjs: ${error.message}`);
   status = 1;
 } finally {
   await browser.close();

@@ -6,6 +6,9 @@
 #include <cmath>
 #include <cassert>
 #include <cstring>
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
 
 #include "core/neo_hookean.h"
 
@@ -470,48 +473,116 @@ PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes&
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
 
-// The rotation R of the polar decomposition of the four lanes' F: polar_rotation's
-// Newton iteration R <- 1/2 (g R + cof R / (g det R)) on all lanes together, with the
-// Frobenius-norm scaling g = (|R^-1| / |R|)^(1/2) (no cube root) while a lane is far from
-// convergence. Converged lanes stay put (an orthogonal R is a fixed point). Returns false,
-// leaving the lanes to polar_rotation, if a lane is (nearly) singular or does not converge.
-PALPATE_INLINE bool polar_rotation_lanes(const Mat3Lanes& F, Mat3Lanes& R) {
-  R = F;
-  Lanes scaled = {1, 1, 1, 1};  // 1 while the lane's last change exceeded 1e-4
-  for (int it = 0; it < 30; ++it) {
-    Mat3Lanes C;
-    cofactor_lanes(R, C);
-    const Lanes det = R(0, 0) * C(0, 0) + R(1, 0) * C(1, 0) + R(2, 0) * C(2, 0);
-    Lanes norm_R = R.m[0] * R.m[0], norm_C = C.m[0] * C.m[0];
+// sqrt of each lane (packed; std::sqrt, which may set errno, would stay scalar).
+PALPATE_INLINE Lanes sqrt_lanes(Lanes a) {
+#if defined(__AVX__)
+  static_assert(kLanes == 4, "the packed square root takes four doubles");
+  return _mm256_sqrt_pd(a);
+#else
+  PALPATE_UNROLL
+  for (int l = 0; l < kLanes; ++l) a[l] = std::sqrt(a[l]);
+  return a;
+#endif
+}
+
+// Squared Frobenius change of a Newton step below which a lane has converged. Newton's
+// polar iteration converges quadratically: the distance of the next iterate from the
+// rotation is about half the squared change of this step (in the spectral norm, for a
+// change d: |R_next - Q| <= d^2 / 2 once the singular values are near 1), so a squared
+// change below 1e-16 leaves an error below 1e-16, the rounding of the iterate itself.
+// (polar_rotation asks for 1e-24, which costs one more iteration and gains nothing.)
+constexpr double kPolarChangeTolerance = 1e-16;
+constexpr int kPolarMaxIterations = 30;
+
+// The rotations R[g] of the polar decompositions of G blocks' F[g] (4 G particles):
+// polar_rotation's Newton iteration R <- 1/2 (g R + cof R / (g det R)) on all lanes
+// together, every operation packed, the G blocks' operations interleaved (one iteration
+// is a chain of dependent operations, a division among them; alone it leaves the FMA
+// units idle most of the time). While some lane is far from convergence (its last
+// squared change above 1e-4) the lanes that are take the Frobenius-norm scaling
+// g = (|R^-1| / |R|)^(1/2) (no cube root; packed square roots and division), the others
+// g = 1; near convergence the norms and roots are skipped. Converged lanes stay put (an
+// orthogonal R is a fixed point). Returns the number of iterations, or 0, leaving the
+// lanes to polar_rotation, if a lane of F is (nearly) singular (the iteration keeps the
+// sign of det and, after one step, lifts every singular value to >= 1, so one check of
+// det F suffices) or a lane does not converge in 30 iterations. scaled_iterations, if
+// given, receives the number of iterations that took the scaling.
+template <int G>
+PALPATE_INLINE int polar_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)[G], int* scaled_iterations = nullptr) {
+  Lanes scaled[G];  // 1 while the lane's last squared change exceeded 1e-4
+  PALPATE_UNROLL
+  for (int g = 0; g < G; ++g) {
+    R[g] = F[g];
+    scaled[g] = Lanes{1, 1, 1, 1};
+  }
+  bool any_scaled = true;
+  int scaled_count = 0;
+  for (int it = 0; it < kPolarMaxIterations; ++it) {
+    Mat3Lanes C[G];
+    Lanes det[G], a[G], b[G];
     PALPATE_UNROLL
-    for (int k = 1; k < 9; ++k) {
-      norm_R += R.m[k] * R.m[k];
-      norm_C += C.m[k] * C.m[k];
+    for (int g = 0; g < G; ++g) {
+      cofactor_lanes(R[g], C[g]);
+      det[g] = R[g](0, 0) * C[g](0, 0) + R[g](1, 0) * C[g](1, 0) + R[g](2, 0) * C[g](2, 0);
     }
-    Lanes g;
-    PALPATE_UNROLL
-    for (int l = 0; l < kLanes; ++l) {
-      if (!(std::abs(det[l]) > 1e-300)) return false;
-      g[l] = scaled[l] != 0 ? std::sqrt(std::sqrt(norm_C[l] / (det[l] * det[l] * norm_R[l]))) : 1.0;
+    if (it == 0) {
+      PALPATE_UNROLL
+      for (int g = 0; g < G; ++g)
+        PALPATE_UNROLL
+        for (int l = 0; l < kLanes; ++l)
+          if (!(std::abs(det[g][l]) > 1e-300)) return 0;
     }
-    const Lanes a = 0.5 * g, b = 0.5 / (g * det);
-    Lanes change = {0, 0, 0, 0};
+    if (!any_scaled) {
+      PALPATE_UNROLL
+      for (int g = 0; g < G; ++g) {
+        a[g] = Lanes{0.5, 0.5, 0.5, 0.5};
+        b[g] = 0.5 / det[g];
+      }
+    } else {
+      PALPATE_UNROLL
+      for (int g = 0; g < G; ++g) {
+        Lanes norm_R = R[g].m[0] * R[g].m[0], norm_C = C[g].m[0] * C[g].m[0];
+        PALPATE_UNROLL
+        for (int k = 1; k < 9; ++k) {
+          norm_R += R[g].m[k] * R[g].m[k];
+          norm_C += C[g].m[k] * C[g].m[k];
+        }
+        // (|cof R| / (|det R| |R|))^(1/2) in the scaled lanes, 1 in the others.
+        const Lanes scale =
+            1.0 + scaled[g] * (sqrt_lanes(sqrt_lanes(norm_C / (det[g] * det[g] * norm_R))) - 1.0);
+        a[g] = 0.5 * scale;
+        b[g] = 0.5 / (scale * det[g]);
+      }
+      ++scaled_count;
+    }
+    Lanes change[G];
     PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) {
-      const Lanes next = a * R.m[k] + b * C.m[k];
-      const Lanes d = next - R.m[k];
-      change += d * d;
-      R.m[k] = next;
+    for (int g = 0; g < G; ++g) {
+      change[g] = Lanes{0, 0, 0, 0};
+      PALPATE_UNROLL
+      for (int k = 0; k < 9; ++k) {
+        const Lanes next = a[g] * R[g].m[k] + b[g] * C[g].m[k];
+        const Lanes d = next - R[g].m[k];
+        change[g] += d * d;
+        R[g].m[k] = next;
+      }
     }
     bool converged = true;
+    any_scaled = false;
     PALPATE_UNROLL
-    for (int l = 0; l < kLanes; ++l) {
-      converged = converged && change[l] < 1e-24;
-      if (!(change[l] > 1e-4)) scaled[l] = 0;
+    for (int g = 0; g < G; ++g)
+      PALPATE_UNROLL
+      for (int l = 0; l < kLanes; ++l) {
+        converged = converged && change[g][l] < kPolarChangeTolerance;
+        if (!(change[g][l] > 1e-4)) scaled[g][l] = 0;
+        any_scaled = any_scaled || scaled[g][l] != 0;
+      }
+    if (converged) {
+      if (scaled_iterations) *scaled_iterations = scaled_count;
+      return it + 1;
     }
-    if (converged) return true;
   }
-  return false;
+  return 0;
 }
 
 // v_i P_i of the laws other than St Venant-Kirchhoff, one lane at a time (the polar
@@ -527,19 +598,41 @@ PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F,
 }
 
 // v_i P_i of the corotational law, P = 2 mu (F - R) + lambda (tr(R^T F) - 3) R, on all
-// four lanes together (the volume term added when volume_term).
+// lanes of G blocks together (the volume term added when volume_term).
+template <bool volume_term, int G>
+PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes (&F)[G], const Lanes (&v)[G],
+                                                 const Lanes (&lambda)[G], const Lanes (&mu)[G], Mat3Lanes (&vP)[G]) {
+  Mat3Lanes R[G];
+  if (polar_rotation_lanes<G>(F, R) == 0) {
+    for (int g = 0; g < G; ++g) weighted_stress_per_lane(m, F[g], v[g], lambda[g], mu[g], vP[g]);
+    return;
+  }
+  PALPATE_UNROLL
+  for (int g = 0; g < G; ++g) {
+    Lanes trace_strain = R[g].m[0] * F[g].m[0];
+    PALPATE_UNROLL
+    for (int k = 1; k < 9; ++k) trace_strain += R[g].m[k] * F[g].m[k];
+    trace_strain -= 3.0;
+    const Lanes v_2mu = (2 * mu[g]) * v[g], v_lambda_tr = (lambda[g] * v[g]) * trace_strain;
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) vP[g].m[k] = v_2mu * (F[g].m[k] - R[g].m[k]) + v_lambda_tr * R[g].m[k];
+    if constexpr (volume_term) add_weighted_volume_term(m, F[g], v[g], vP[g]);
+  }
+}
+
+// v_i P_i of the small-strain linear law, P = 2 mu eps + lambda tr(eps) I, eps = sym(F) - I
+// (linear_stress), on all four lanes together (the volume term added when volume_term).
 template <bool volume_term>
-PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
-                                                 const Lanes mu, Mat3Lanes& vP) {
-  Mat3Lanes R;
-  if (!polar_rotation_lanes(F, R)) return weighted_stress_per_lane(m, F, v, lambda, mu, vP);
-  Lanes trace_strain = R.m[0] * F.m[0];
+PALPATE_INLINE void weighted_linear_stress(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
+                                           const Lanes mu, Mat3Lanes& vP) {
+  const Lanes v_2mu = (2 * mu) * v, v_mu = mu * v;
+  const Lanes v_lambda_tr = (lambda * v) * (F(0, 0) + F(1, 1) + F(2, 2) - 3.0);
   PALPATE_UNROLL
-  for (int k = 1; k < 9; ++k) trace_strain += R.m[k] * F.m[k];
-  trace_strain -= 3.0;
-  const Lanes v_2mu = (2 * mu) * v, v_lambda_tr = (lambda * v) * trace_strain;
-  PALPATE_UNROLL
-  for (int k = 0; k < 9; ++k) vP.m[k] = v_2mu * (F.m[k] - R.m[k]) + v_lambda_tr * R.m[k];
+  for (int r = 0; r < 3; ++r) {
+    vP(r, r) = v_2mu * (F(r, r) - 1.0) + v_lambda_tr;
+    PALPATE_UNROLL
+    for (int c = r + 1; c < 3; ++c) vP(r, c) = vP(c, r) = v_mu * (F(r, c) + F(c, r));
+  }
   if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
 }
 
@@ -617,31 +710,54 @@ PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
 
+// The force loop over G blocks at a time: F of each, their stresses v_i P_i, the
+// forces. G = 2 for the corotational law (its polar iterations interleave).
+template <bool volume_term, int G>
+PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const double* __restrict x,
+                                              double* __restrict f) {
+  const int n = m.particle_count;
+  int i[G][kLanes];
+  Mat3Lanes F[G], vP[G];
+  Lanes v[G], lambda[G], mu[G];
+  PALPATE_UNROLL
+  for (int g = 0; g < G; ++g) {
+    const Block& block = m.blocks[b0 + g];
+    block_particles(b0 + g, n, i[g]);
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) F[g].m[k] = load(block.rest_correction[k]);  // F_i = C_i + sum_j (x_j - x_i) d_j^T
+    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i[g], F[g]);
+    v[g] = load(block.volume);
+    lambda[g] = load(block.lame_lambda);
+    mu[g] = load(block.lame_mu);
+  }
+  if (m.law == MaterialLaw::corotational) {
+    weighted_corotational_stress<volume_term, G>(m, F, v, lambda, mu, vP);
+  } else {
+    PALPATE_UNROLL
+    for (int g = 0; g < G; ++g) {
+      if (m.law == MaterialLaw::neo_hookean)
+        weighted_neo_hookean_stress<volume_term>(m, F[g], v[g], lambda[g], mu[g], vP[g]);
+      else if (m.law == MaterialLaw::linear)
+        weighted_linear_stress<volume_term>(m, F[g], v[g], lambda[g], mu[g], vP[g]);
+      else
+        weighted_piola_stress<volume_term>(m, F[g], v[g], lambda[g], mu[g], vP[g]);
+    }
+  }
+  PALPATE_UNROLL
+  for (int g = 0; g < G; ++g) {
+    const Block& block = m.blocks[b0 + g];
+    scatter_forces(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, vP[g], i[g],
+                   std::min(kLanes, n - kLanes * (b0 + g)), f);
+  }
+}
+
 template <bool volume_term>
 void internal_forces_blocked(const Model& m, const double* __restrict x, double* __restrict f) {
-  const int n = m.particle_count;
-  for (int b = 0; b < static_cast<int>(m.blocks.size()); ++b) {
-    const Block& block = m.blocks[b];
-    const Slot* begin = m.block_slots.data() + block.slot_begin;
-    const Slot* end = m.block_slots.data() + block.slot_end;
-    int i[kLanes];
-    block_particles(b, n, i);
-    Mat3Lanes F;  // F_i = C_i + sum_j (x_j - x_i) d_j^T
-    PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
-    add_gradient(begin, end, x, i, F);
-    Mat3Lanes vP;
-    const Lanes v = load(block.volume), lambda = load(block.lame_lambda), mu = load(block.lame_mu);
-    if (m.law == MaterialLaw::corotational)
-      weighted_corotational_stress<volume_term>(m, F, v, lambda, mu, vP);
-    else if (m.law == MaterialLaw::neo_hookean)
-      weighted_neo_hookean_stress<volume_term>(m, F, v, lambda, mu, vP);
-    else if (m.law != MaterialLaw::stvk)
-      weighted_stress_per_lane(m, F, v, lambda, mu, vP);
-    else
-      weighted_piola_stress<volume_term>(m, F, v, lambda, mu, vP);
-    scatter_forces(block, begin, end, vP, i, std::min(kLanes, n - kLanes * b), f);
-  }
+  const int blocks = static_cast<int>(m.blocks.size());
+  int b = 0;
+  if (m.law == MaterialLaw::corotational)
+    for (; b + 2 <= blocks; b += 2) internal_forces_of_blocks<volume_term, 2>(m, b, x, f);
+  for (; b < blocks; ++b) internal_forces_of_blocks<volume_term, 1>(m, b, x, f);
 }
 
 template <bool volume_term>
@@ -678,9 +794,42 @@ bool use_blocks(const Model& m) {
          static_cast<int>(m.blocks.size()) * kLanes >= m.particle_count;
 }
 
+// Iterations of the blocked loop's polar decompositions at positions x (corotational
+// law), each counted once per real (not padding) lane: all of them, and those that took
+// the scaling. Blocks that fall back to polar_rotation are not counted.
+void count_polar_iterations(const Model& m, const double* x, double& iterations, double& scaled_iterations) {
+  iterations = scaled_iterations = 0;
+  const int n = m.particle_count;
+  for (int b = 0; b < static_cast<int>(m.blocks.size()); ++b) {
+    const Block& block = m.blocks[b];
+    int i[kLanes];
+    block_particles(b, n, i);
+    Mat3Lanes F[1], R[1];
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) F[0].m[k] = load(block.rest_correction[k]);
+    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i, F[0]);
+    int scaled = 0;
+    const int lanes = std::min(kLanes, n - kLanes * b);
+    iterations += lanes * polar_rotation_lanes<1>(F, R, &scaled);
+    scaled_iterations += lanes * scaled;
+  }
+}
+
 }  // namespace
 
 bool detail::uses_blocked_loops(const Model& model) { return use_blocks(model); }
+
+Mat3 detail::polar_rotation(const Mat3& F) { return palpate::polar_rotation(F); }
+
+int detail::polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]) {
+  Mat3Lanes F_lanes[1], R_lanes[1];
+  for (int l = 0; l < kLanes; ++l)
+    for (int k = 0; k < 9; ++k) F_lanes[0].m[k][l] = F[l](k % 3, k / 3);
+  const int iterations = polar_rotation_lanes<1>(F_lanes, R_lanes);
+  for (int l = 0; l < kLanes; ++l)
+    for (int k = 0; k < 9; ++k) R[l](k % 3, k / 3) = R_lanes[0].m[k][l];
+  return iterations;
+}
 
 Mat3 deformation_gradient(const Model& model, const Points& x, int i) { return gradient_at(model, x.data(), i); }
 
@@ -745,21 +894,54 @@ void mls_force_differential(const Model& m, const std::vector<double>& tangent_F
     force_differential_blocked<false>(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
 }
 
-double mls_internal_forces_flops(const Model& m) {
-  // Floating-point operations (an FMA counts two) of the arithmetic the force loop
-  // needs, as the code does it; padding slots and lanes of the blocked loop are not counted.
+double mls_internal_forces_flops(const Model& m, const Points& x) {
+  // Floating-point operations (an FMA counts two; a division, square root or logarithm one)
+  // of the arithmetic the force loop needs, as the code does it; padding slots and lanes of
+  // the blocked loop are not counted.
   const double nnz = m.neighbor_offset.back(), n = m.particle_count;
   if (use_blocks(m)) {
-    // Per neighbour pair: F += (x_j - x_i) d_j^T 3 sub + 9 fma = 21; g = T d_j 3 x (mul + 2 fma)
-    // = 15; f_j -= g 3: 39.
-    // Per particle: F^T F 6 x (mul + 2 fma) = 30; E 3 fma + 3 mul = 9; lambda v tr E 4, 2 mu v 1;
-    // v S 3 fma + 3 mul = 9; P = F (v S) 9 x (mul + 2 fma) = 45; f_i -= T d_i 15 + 3: 116.
-    // Volume term per particle: cof F 9 x (mul + fma) = 27, J 5, k_v v (J - 1) 3, P += 9 fma 18: 53.
-    return nnz * 39.0 + n * (116.0 + (m.volume_stiffness > 0 ? 53.0 : 0.0));
+    // Every law, per neighbour pair: F += (x_j - x_i) d_j^T 3 sub + 9 fma = 21;
+    // g = v_i P_i d_j 3 x (mul + 2 fma) = 15; f_j -= g 3: 39. Per particle:
+    // f_i -= v_i P_i d_i 15 + 3 = 18. Volume term per particle: cof F
+    // 9 x (mul + fma) = 27, J 5, k_v v (J - 1) 3, P += 9 fma 18: 53.
+    double per_particle = 18.0 + (m.volume_stiffness > 0 ? 53.0 : 0.0);
+    double polar = 0;
+    switch (m.law) {
+      case MaterialLaw::stvk:
+        // F^T F 6 x (mul + 2 fma) = 30; E 3 fma + 3 mul = 9; lambda v tr E 4, 2 mu v 1;
+        // v S 3 fma + 3 mul = 9; P = F (v S) 9 x (mul + 2 fma) = 45: 98.
+        per_particle += 98.0;
+        break;
+      case MaterialLaw::linear:
+        // 2 mu v 2, mu v 1, lambda v (tr F - 3) 5; diagonal 3 x (sub + fma) = 9; off-diagonal
+        // 3 x (add + mul) = 6: 23.
+        per_particle += 23.0;
+        break;
+      case MaterialLaw::neo_hookean:
+        // (1.14): cof F 27, J 5, ln J 1, mu v 1, v (lambda ln J - mu) / J 4, P = mu v F + s cof F
+        // 9 x (mul + fma) = 27: 65.
+        per_particle += 65.0;
+        break;
+      case MaterialLaw::corotational: {
+        // After the polar decomposition: tr(R^T F) - 3 (1 mul + 8 fma + 1) = 18, 2 mu v 2,
+        // lambda v tr 2, P = 2 mu v (F - R) + lambda v tr R 9 x (sub + mul + fma) = 36: 58.
+        per_particle += 58.0;
+        // Each Newton iteration of polar_rotation_lanes: cof R 27, det R 5, 1 / det 1, the
+        // update a R + b cof R 9 x (mul + fma) = 27, its squared change 9 x (sub + fma) = 27:
+        // 87; a scaled one also |R|^2, |cof R|^2 2 x (1 mul + 8 fma) = 34, g (2 mul, 1 div,
+        // 2 sqrt, 3 for the lanes' choice) 8, a 1, g det 1: 131. Data dependent: counted at x.
+        double iterations = 0, scaled = 0;
+        count_polar_iterations(m, x.data(), iterations, scaled);
+        polar = 87.0 * iterations + 44.0 * scaled;
+        break;
+      }
+    }
+    return nnz * 39.0 + n * per_particle + polar;
   }
   // Per particle loop: per pair 21 (F) + 15 (T d_j) + 3 (f_j) + 3 (f_i sum) = 42, per particle about
   // 130 (E, S, P with Eigen 3x3 products; energy density) plus the volume term, and the hourglass
   // residuals r_ij = x_ij - F X_ij, G += kw r X^T and its direct forces: about 60 per pair.
+  // (The St Venant-Kirchhoff law's count; the per-particle loop is the reference, not timed.)
   return nnz * (42.0 + (m.hourglass_weight.empty() ? 0.0 : 60.0)) +
          n * (130.0 + (m.volume_stiffness > 0 ? 60.0 : 0.0));
 }

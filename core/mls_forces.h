@@ -38,9 +38,10 @@ void mls_linearize(const Model& model, const Points& x, std::vector<double>& tan
 void mls_force_differential(const Model& model, const std::vector<double>& tangent_F,
                         const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df);
 
-// Floating-point operations of one mls_internal_forces call (for the benchmark's GFLOP/s),
-// as the St Venant-Kirchhoff law does them.
-double mls_internal_forces_flops(const Model& model);
+// Floating-point operations of one mls_internal_forces call at positions x (for the
+// benchmark's GFLOP/s), counted by hand from the blocked loop of the model's law; for the
+// corotational law the polar iterations at x are counted by running them.
+double mls_internal_forces_flops(const Model& model, const Points& x);
 
 namespace detail {
 // Whether mls_internal_forces and mls_force_differential take the vectorised loops over
@@ -48,6 +49,13 @@ namespace detail {
 // Model without blocks). For tests: a copy of a Model with its blocks cleared runs the
 // reference loops on the same support domains, weights and volumes.
 bool uses_blocked_loops(const Model& model);
+
+// The polar rotation of the per-particle formulas (Higham's scaled Newton iteration to a
+// squared change of 1e-24), and the vectorised one of the blocked corotational loop on
+// four matrices at once; the latter returns its iteration count, or 0 when it leaves the
+// lanes to the former (a (nearly) singular F, or no convergence), R then unspecified.
+Mat3 polar_rotation(const Mat3& F);
+int polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]);
 }  // namespace detail
 
 }  // namespace palpate

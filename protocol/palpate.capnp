@@ -282,6 +282,11 @@ struct SessionInfo {
                                        # outside: the undeformed boundary surface (empty: none known)
   surfaceVertices @20 :List(UInt32);   # the particles surfaceTriangles references, each once, ascending:
                                        # the order of a frame's per-particle lists with FrameFields.surfaceOnly
+  referenceForces @21 :List(Float64);       # N: the stored finite-block reference of this scene (the one of
+                                            # the server's --scene-dir/references whose key matches), for a
+                                            # force-depth plot; empty when the server has none
+  referenceIndentation @22 :List(Float64);  # m, the converged indentation at each of referenceForces
+  referenceUncertainty @23 :List(Float64);  # m, its uncertainty
 }
 
 # ---------------------------------------------------------------------------
@@ -402,6 +407,10 @@ struct Stats {
   realtimePriority @12 :Bool;     # SCHED_FIFO granted to the loop thread
   spinMarginUs @13 :Float64;      # the loop sleeps until this long before a deadline, then spins
   stiffnessEvaluations @14 :UInt64;  # contact stiffnesses computed for the local models (docs/protocol.md)
+  missesLateStart @15 :UInt64;    # of deadlineMisses: the tick started over half a period late (the host
+                                  # did not run the loop in time)
+  missesLongStep @16 :UInt64;     # of deadlineMisses: the tick started in time and its work overran
+  pinned @17 :Bool;               # the loop runs on a core of its own (palpate-server pins unless --no-pin)
 }
 
 enum RunState {

@@ -13,10 +13,16 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <sys/mman.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <thread>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -69,6 +75,12 @@ loop, or headless stepping on request. Once it accepts connections it prints one
                        (default 200)
   --no-realtime        do not ask for SCHED_FIFO (by default the loops get priority 10
                        and the RPC thread 5 when the system allows it)
+  --no-pin             do not pin threads (by default, with two cores or more, each real-time
+                       loop runs on one of cores 1 ... n-1 in turn and the RPC thread, the
+                       contact-stiffness workers and headless sessions on core 0)
+  --no-lock-memory     do not lock the server's memory (by default mlockall keeps every page
+                       resident, so no tick waits for a page fault; refused without the
+                       privilege: a warning, and it runs unlocked)
   --sndbuf BYTES       SO_SNDBUF of accepted sockets, bounding how far a slow reader falls
                        behind; 0 keeps the system's (default 262144)
   --max-sessions N     sessions at a time, [1, 1024] (default 16)
@@ -110,6 +122,11 @@ struct Args {
   std::string host = "127.0.0.1";
   unsigned port = 7420;
   std::optional<HostPort> http;
+#ifdef PALPATE_SANITIZED
+  bool lock_memory = false;  // the sanitizers' shadow memory cannot be locked
+#else
+  bool lock_memory = true;
+#endif
   palpate::server::WebOptions web;
   std::string log_level = "warn";
   int sndbuf = 256 * 1024;
@@ -149,6 +166,10 @@ Args parse_args(int argc, char** argv) {
       a.options.spin_margin_us = args.number(0, 1e6);
     } else if (flag == "--no-realtime") {
       a.options.try_realtime = false;
+    } else if (flag == "--no-pin") {
+      a.options.pin_threads = false;
+    } else if (flag == "--no-lock-memory") {
+      a.lock_memory = false;
     } else if (flag == "--sndbuf") {
       a.sndbuf = static_cast<int>(args.integer(0, 1 << 30));
     } else if (flag == "--max-particles") {
@@ -243,6 +264,25 @@ int main(int argc, char** argv) {
   // The RPC thread streams the 1 kHz frames: below the simulation threads'
   // SCHED_FIFO priority (10) but above ordinary load. Silently kept SCHED_OTHER
   // when refused (or with --no-realtime).
+  // Memory stays resident (current and future pages: models, states, frames), so a tick
+  // never waits for a page fault.
+  // MCL_FUTURE only where no lock limit can make a later allocation fail (root, which has
+  // CAP_IPC_LOCK, or an unlimited RLIMIT_MEMLOCK); elsewhere the memory stays unlocked.
+  if (args.lock_memory) {
+    rlimit limit{};
+    getrlimit(RLIMIT_MEMLOCK, &limit);
+    if (geteuid() != 0 && limit.rlim_cur != RLIM_INFINITY)
+      spdlog::info("memory not locked: RLIMIT_MEMLOCK is {} bytes (ulimit -l unlimited to lock it)", limit.rlim_cur);
+    else if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
+      spdlog::warn("mlockall refused ({}): memory is not locked (--no-lock-memory hides this)", std::strerror(errno));
+  }
+  // Core 0 for the RPC thread and what it starts (the loops re-pin themselves to 1 ... n-1).
+  if (args.options.pin_threads && std::thread::hardware_concurrency() >= 2) {
+    cpu_set_t core0;
+    CPU_ZERO(&core0);
+    CPU_SET(0, &core0);
+    pthread_setaffinity_np(pthread_self(), sizeof core0, &core0);
+  }
   if (args.options.try_realtime) {
     sched_param param{};
     param.sched_priority = 5;

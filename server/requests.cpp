@@ -190,6 +190,7 @@ OpenPlan plan_session(wire::OpenRequest::Reader request, const ServerOptions& op
   plan.sim.spin_margin_us = options.spin_margin_us;
   plan.sim.try_realtime = options.try_realtime;
   plan.sim.checkpoint_interval = options.checkpoint_interval;
+  plan.sim.reference_dir = options.scene_dir / "references";
   const double rate = request.getRateHz();
   if (!(rate == 0.0 || (rate > 0.0 && rate <= 10000.0)))
     fail("openSession: request.rateHz: must be in (0, 10000] (0 = the server's rate), got " + std::to_string(rate));

@@ -9,6 +9,7 @@
 #include "server/session.h"
 
 #include <algorithm>
+#include <thread>
 #include <cmath>
 #include <stdexcept>
 
@@ -178,7 +179,7 @@ class SessionImpl final : public wire::Session::Server {
  public:
   // Starts the session's thread on the plan; the scene is resolved and validated there.
   SessionImpl(ServerContext& ctx, OpenPlan plan)
-      : ctx_(ctx), id_(ctx.next_session_id++), sim_(start(plan, ctx.options)) {
+      : ctx_(ctx), id_(ctx.next_session_id++), sim_(start(plan, ctx.options, ctx.next_loop_cpu(plan.sim.headless))) {
     ctx_.sessions[id_] = this;
     wake_ = ctx_.io.lowLevelProvider->wrapInputFd(
         sim_->wake_fd(), kj::LowLevelAsyncIoProvider::ALREADY_CLOEXEC | kj::LowLevelAsyncIoProvider::ALREADY_NONBLOCK);
@@ -261,6 +262,14 @@ class SessionImpl final : public wire::Session::Server {
     for (unsigned k = 0; k < triangles.size(); ++k) triangles.set(k, static_cast<uint32_t>(t[k]));
     auto vertices = info.initSurfaceVertices(static_cast<unsigned>(surface_vertices_.size()));
     for (unsigned k = 0; k < vertices.size(); ++k) vertices.set(k, surface_vertices_[k]);
+    if (const auto& ref = sim_->reference()) {
+      auto copy = [](const std::vector<double>& from, capnp::List<double>::Builder to) {
+        for (unsigned k = 0; k < to.size(); ++k) to.set(k, from[k]);
+      };
+      copy(ref->forces, info.initReferenceForces(static_cast<unsigned>(ref->forces.size())));
+      copy(ref->indentation, info.initReferenceIndentation(static_cast<unsigned>(ref->indentation.size())));
+      copy(ref->uncertainty, info.initReferenceUncertainty(static_cast<unsigned>(ref->uncertainty.size())));
+    }
     info.setTouchHeight(m.touch_height);
     info.setRadius(m.indenter_radius);
     info.setYoungModulus(s.material.young_modulus);
@@ -397,6 +406,9 @@ class SessionImpl final : public wire::Session::Server {
     s.setRealtimePriority(c.realtime_priority);
     s.setSpinMarginUs(sim_->config().spin_margin_us);
     s.setStiffnessEvaluations(c.stiffness_evaluations);
+    s.setMissesLateStart(c.misses_late_start);
+    s.setMissesLongStep(c.misses_long_step);
+    s.setPinned(c.pinned);
     auto subs = s.initSubscribers(static_cast<unsigned>(subscribers_.size()));
     unsigned k = 0;
     for (const auto& sub : subscribers_) {
@@ -470,8 +482,9 @@ class SessionImpl final : public wire::Session::Server {
     });
   }
 
-  static std::unique_ptr<Simulation> start(OpenPlan& plan, const ServerOptions& options) {
-    const SimConfig config = plan.sim;
+  static std::unique_ptr<Simulation> start(OpenPlan& plan, const ServerOptions& options, int cpu) {
+    SimConfig config = plan.sim;
+    config.cpu = cpu;
     // Runs on the session's thread; RPC errors become plain exceptions there.
     auto prepare = [plan = std::move(plan), options]() -> Scene {
       try {
@@ -524,7 +537,17 @@ class SessionImpl final : public wire::Session::Server {
       job_ = nullptr;
       job->fulfill();
     }
-    if (fresh) stream(sim_->frames().front());
+    if (fresh) {
+      const Snapshot& frame = sim_->frames().front();
+      // A blow-up is logged here, on the RPC thread: the simulation thread never logs.
+      if (frame.recoveries > logged_blow_ups_) {
+        logged_blow_ups_ = frame.recoveries;
+        const SimStatus status = sim_->status();
+        spdlog::warn("session {}: blow-up #{} at tick {}: {}", id_, frame.recoveries, status.last_blow_up_tick,
+                     status.last_blow_up);
+      }
+      stream(frame);
+    }
   }
 
   void stream(const Snapshot& frame) {
@@ -612,6 +635,7 @@ class SessionImpl final : public wire::Session::Server {
   // parts the session's thread touches).
   ServerContext& ctx_;
   uint32_t id_;
+  uint32_t logged_blow_ups_ = 0;   // recoveries already logged (on_wake)
   std::unique_ptr<Simulation> sim_;  // declared before the watchers: destroyed after them
   kj::Own<kj::AsyncInputStream> wake_;
   kj::Promise<void> wake_loop_ = nullptr;
@@ -723,6 +747,14 @@ kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
 void ServerContext::stop_all() {
   for (auto& [id, s] : sessions) s->stop();
   for (Closing* c : closing_) c->sim->stop();
+}
+
+int ServerContext::next_loop_cpu(bool headless) {
+  const int cores = static_cast<int>(std::thread::hardware_concurrency());
+  if (headless || !options.pin_threads || cores < 2) return -1;
+  const int cpu = 1 + next_loop_core_ % (cores - 1);  // core 0 keeps the RPC thread and the workers
+  ++next_loop_core_;
+  return cpu;
 }
 
 Probe ServerContext::health_probe(HealthWindow& window, double min_rate_fraction, double max_miss_fraction) {

@@ -55,6 +55,10 @@ struct ServerContext {
   kj::Promise<void> close_all(const char* reason);
   void add_task(kj::Promise<void> task) { tasks_.add(kj::mv(task)); }
 
+  // The core a new session's real-time loop pins itself to: 1 ... n-1 in turn (-1: headless,
+  // --no-pin, or a single core).
+  int next_loop_cpu(bool headless);
+
   // /healthz (server/web.h) and the Agones health pings (server/agones.h): healthy while
   // every running real-time session held, since the previous probe with the same
   // `window` (or since it started), at least min_rate_fraction of its rate with at most
@@ -81,6 +85,7 @@ struct ServerContext {
   struct ErrorHandler : kj::TaskSet::ErrorHandler {
     void taskFailed(kj::Exception&& e) override;
   } error_handler_;
+  int next_loop_core_ = 0;  // the next real-time loop's turn (next_loop_cpu)
   std::set<Closing*> closing_;  // declared before tasks_: a Closing (held by a task) erases itself
   kj::TaskSet tasks_{error_handler_};
 };

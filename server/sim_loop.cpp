@@ -155,6 +155,9 @@ SimCounters Simulation::counters() const {
   c.frames_coalesced = frames_coalesced_.load(std::memory_order_relaxed);
   c.blow_ups = blow_ups_.load(std::memory_order_relaxed);
   c.realtime_priority = realtime_priority_.load(std::memory_order_relaxed);
+  c.pinned = pinned_.load(std::memory_order_relaxed);
+  c.misses_late_start = misses_late_start_.load(std::memory_order_relaxed);
+  c.misses_long_step = misses_long_step_.load(std::memory_order_relaxed);
   c.stiffness_evaluations = stiffness_evaluations_.load(std::memory_order_relaxed);
   c.step_us = step_us_.summary();
   c.lateness_us = lateness_us_.summary();
@@ -205,6 +208,14 @@ void Simulation::prepare_and_build() {
   frames_writer_ = std::move(frames.writer);
   frames_reader_ = std::move(frames.reader);
   build_seconds_ = (now_ns() - t0) * 1e-9;
+  check_cancelled();
+  if (!config_.reference_dir.empty()) {
+    try {
+      reference_ = find_reference(scene_, config_.reference_dir);
+    } catch (const std::exception& e) {  // a reference is a display aid: never fails a session
+      spdlog::warn("stored references in {}: {}", config_.reference_dir.string(), e.what());
+    }
+  }
 }
 
 void Simulation::run() {
@@ -233,6 +244,11 @@ void Simulation::run() {
 }
 
 void Simulation::run_headless() {
+  // Headless stepping may use any core (it inherited the RPC thread's affinity).
+  cpu_set_t all;
+  CPU_ZERO(&all);
+  for (int k = 0; k < CPU_SETSIZE && k < static_cast<int>(std::thread::hardware_concurrency()); ++k) CPU_SET(k, &all);
+  pthread_setaffinity_np(pthread_self(), sizeof all, &all);
   start_ns_.store(now_ns(), std::memory_order_relaxed);
   last_tick_ns_.store(start_ns_.load(), std::memory_order_relaxed);
   for (;;) {
@@ -259,6 +275,17 @@ void Simulation::run_realtime() {
     param.sched_priority = 10;
     if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) == 0) realtime_priority_.store(true);
   }
+  if (config_.cpu >= 0) {  // a core of its own (the RPC thread and the workers stay off it)
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(config_.cpu, &one);
+    if (pthread_setaffinity_np(pthread_self(), sizeof one, &one) == 0) pinned_.store(true);
+  }
+  // Touch the stack the steps will use, so that no page fault lands in a tick.
+  {
+    volatile char stack[256 * 1024];
+    for (size_t k = 0; k < sizeof stack; k += 4096) stack[k] = 0;
+  }
   const int64_t period = static_cast<int64_t>(std::llround(1e9 / config_.rate_hz));
   const int64_t margin = static_cast<int64_t>(config_.spin_margin_us * 1000.0);
   const int64_t start = now_ns();
@@ -270,8 +297,6 @@ void Simulation::run_realtime() {
     while (now_ns() < deadline) cpu_relax();
     const int64_t tick_start = now_ns();
     lateness_us_.add((tick_start - deadline) * 1e-3);
-    if (tick_start - deadline > 5 * period)
-      spdlog::debug("tick {} started {:.1f} ms late", state_->tick, (tick_start - deadline) * 1e-6);
 
     if (tick_once()) publish();
 
@@ -280,6 +305,9 @@ void Simulation::run_realtime() {
     deadline += period;
     if (end > deadline) {
       deadline_misses_.fetch_add(1, std::memory_order_relaxed);
+      // Started over half a period late: the host's; else the step itself overran.
+      const bool late_start = tick_start - (deadline - period) > period / 2;
+      (late_start ? misses_late_start_ : misses_long_step_).fetch_add(1, std::memory_order_relaxed);
       if (end > deadline + period) {  // over a full period behind: abandon deadlines, keep the phase grid
         const int64_t behind = (end - deadline) / period;
         deadline += behind * period;
@@ -369,7 +397,7 @@ void Simulation::set_position_mode(bool on) {
 void Simulation::recover(const std::string& what) {
   const Model& model = *model_;
   State& state = *state_;
-  const uint32_t count = blow_ups_.fetch_add(1, std::memory_order_relaxed) + 1;
+  blow_ups_.fetch_add(1, std::memory_order_relaxed);
   const bool again = ticks_since_recovery_ >= 0 && ticks_since_recovery_ <= 2 * config_.checkpoint_interval;
   std::string how;
   const double command = pressing_force(state);
@@ -396,7 +424,7 @@ void Simulation::recover(const std::string& what) {
     last_blow_up_ = message;
     last_blow_up_tick_ = state.tick;
   }
-  spdlog::warn("session blow-up #{}: {}", count, message);
+  // Logged by the RPC thread when a frame's recoveries count rises (session.cpp): never here.
 }
 
 // The frame's local models (wire LocalModel): the contact force as a function of the

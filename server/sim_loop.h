@@ -14,7 +14,9 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
+#include <optional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -23,6 +25,7 @@
 
 #include "core/checkpoint.h"
 #include "core/model.h"
+#include "core/reference_file.h"
 #include "core/options.h"
 #include "core/scene.h"
 #include "core/state.h"
@@ -59,12 +62,20 @@ struct SimConfig {
   double rate_hz = 1000.0;
   double spin_margin_us = 200.0;  // sleep until this long before the deadline, then spin
   bool try_realtime = true;       // ask for SCHED_FIFO (silently refused when not allowed)
+  // The core the real-time loop pins itself to (-1: none). The server gives each real-time
+  // session one of cores 1 ... n-1 in turn and keeps the RPC thread, the stiffness workers
+  // and headless sessions on the others (palpate-server --no-pin turns it off).
+  int cpu = -1;
   int checkpoint_interval = 100;  // ticks between checkpoints of the last good state
   DeviceLimits device;            // OpenRequest.device
   CouplingOptions coupling;       // OpenRequest.coupling; stiffness 0 = default_coupling()
   // Compute the contact stiffness of the frames' local models (StiffnessSource): on a
   // worker thread in real time, at each publish when headless. Off: stiffness zero.
   bool contact_stiffness = true;
+  // Where the stored finite-block references are (palpate-reference --out): the one whose
+  // key matches the session's scene is read on the session's thread at its start and
+  // given to clients (SessionInfo.reference*). Empty: none looked up.
+  std::filesystem::path reference_dir;
   // TEST HOOK (tests/server_simulation_test.cpp only; empty in the server): called on
   // the session's thread with the state just before each step, e.g. to inject a NaN.
   std::function<void(State&)> before_step_for_tests;
@@ -87,8 +98,12 @@ struct SimCounters {
   double elapsed_s = 0.0;
   double stepping_s = 0.0;  // wall time spent inside step() (headless rate)
   uint64_t deadline_misses = 0, skipped_ticks = 0, frames_published = 0, frames_coalesced = 0;
+  // The misses by cause: the tick started over half a period late (the host did not run the
+  // thread in time), or it started in time and its step overran.
+  uint64_t misses_late_start = 0, misses_long_step = 0;
   uint32_t blow_ups = 0;
   bool realtime_priority = false;
+  bool pinned = false;  // the loop runs on SimConfig::cpu only
   uint64_t stiffness_evaluations = 0;
   Histogram::Summary step_us, lateness_us;
 };
@@ -132,6 +147,9 @@ class Simulation {
   // The options the loop started with (the scene's), and the coupling in effect at the
   // start (default_coupling, or the request's clamped): after phase() == ready only.
   const Options& initial_options() const { return initial_options_; }
+  // The stored reference of the scene (SimConfig::reference_dir), if there is one: after
+  // phase() == ready only.
+  const std::optional<Reference>& reference() const { return reference_; }
   CouplingOptions initial_coupling() const { return initial_coupling_; }
 
   // RPC thread. Returns the command's sequence number (> 0), or 0 when the queue
@@ -187,6 +205,7 @@ class Simulation {
   Scene scene_;
   std::unique_ptr<Model> model_;
   double build_seconds_ = 0.0;
+  std::optional<Reference> reference_;
   Options initial_options_;
   CouplingOptions initial_coupling_;
 
@@ -229,8 +248,9 @@ class Simulation {
   std::atomic<int64_t> start_ns_{0}, last_tick_ns_{0};
   std::atomic<int64_t> stepping_ns_{0};
   std::atomic<uint64_t> deadline_misses_{0}, skipped_ticks_{0}, frames_published_{0}, frames_coalesced_{0};
+  std::atomic<uint64_t> misses_late_start_{0}, misses_long_step_{0};
   std::atomic<uint32_t> blow_ups_{0};
-  std::atomic<bool> realtime_priority_{false};
+  std::atomic<bool> realtime_priority_{false}, pinned_{false};
   std::atomic<uint64_t> stiffness_evaluations_{0};  // copied from stiffness_ at each publish
   std::atomic<bool> paused_flag_{false};
   std::atomic<int64_t> status_tick_{0};

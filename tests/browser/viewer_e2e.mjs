@@ -50,6 +50,11 @@ try {
   const before = JSON.parse(await page.eval("JSON.stringify({d: palpateViewer.maxDisplacement(), c: palpateViewer.canvasStats(), info: {id: palpateViewer.session.info.sessionId, r: palpateViewer.session.info.radius, e: palpateViewer.session.info.youngModulus, nu: palpateViewer.session.info.poissonRatio}})"));
   check(before.c.drawn > 0.1 && before.c.colours > 8, "the canvas is drawn", `${(100 * before.c.drawn).toFixed(1)} % of pixels, ${before.c.colours} colours`);
   check(before.d < 1e-6, "the surface starts at rest", `largest displacement ${before.d} m`);
+  // The scene's stored reference reaches the page (the haptic scene shares the default block's).
+  const stored = JSON.parse(readFileSync(join(args.scenes, "references", "hertz_cube.json"), "utf8"));
+  const shown = JSON.parse(await page.eval("JSON.stringify({f: Array.from(palpateViewer.session.info.reference.forces), d: Array.from(palpateViewer.session.info.reference.indentation)})"));
+  check(JSON.stringify(shown.f) === JSON.stringify(stored.forces) && JSON.stringify(shown.d) === JSON.stringify(stored.indentation),
+        "the page has the scene's stored finite-block reference", `${shown.f.length} forces`);
 
   // 2. Press through the slider's hook.
   const force = 100; // N: d/R ~ 0.08 on the haptic scene

@@ -88,7 +88,7 @@ async function main(): Promise<void> {
   $<HTMLSelectElement>("field").value = field;
 
   const view = new TissueView($<HTMLCanvasElement>("view"), info);
-  const plot = new ForceDepthPlot($<HTMLCanvasElement>("plot"), info.radius, info.youngModulus, info.poissonRatio);
+  const plot = new ForceDepthPlot($<HTMLCanvasElement>("plot"), info.radius, info.youngModulus, info.poissonRatio, info.reference);
 
   // The force slider: 0 ... fmax N, pressing down.
   const fmax = Number(params.get("fmax") ?? 0) || Math.min(info.forceLimit, 1.5 * hertzForce(info.radius / 5, info.radius, info.youngModulus, info.poissonRatio));

@@ -1,6 +1,7 @@
 // The live force-depth plot: the frames' (indentation, contact force) against Hertz's
 // rigid sphere on an elastic half-space, F = 4/3 E* sqrt(R) d^(3/2), E* = E / (1 - nu^2)
-// (docs/physics.md (3.1), (3.2)), on a 2-D canvas.
+// (docs/physics.md (3.1), (3.2)), and the scene's converged finite-block reference where
+// the server has one (its depths with their uncertainty as bars), on a 2-D canvas.
 export function hertzForce(depth: number, radius: number, youngModulus: number, poissonRatio: number): number {
   if (depth <= 0) return 0;
   const effective = youngModulus / (1 - poissonRatio * poissonRatio);
@@ -20,10 +21,20 @@ export class ForceDepthPlot {
     private radius: number,
     private youngModulus: number,
     private poissonRatio: number,
+    private reference: { forces: Float64Array; indentation: Float64Array; uncertainty: Float64Array } = {
+      forces: new Float64Array(0),
+      indentation: new Float64Array(0),
+      uncertainty: new Float64Array(0),
+    },
   ) {
     // Start with the range of d/R = 0.1 so that Hertz is visible before any press.
     this.dMax = 0.1 * radius;
     this.fMax = hertzForce(this.dMax, radius, youngModulus, poissonRatio);
+    // ... and the reference's range when there is one.
+    for (let k = 0; k < reference.forces.length; k++) {
+      this.dMax = Math.max(this.dMax, 1.05 * (reference.indentation[k] + reference.uncertainty[k]));
+      this.fMax = Math.max(this.fMax, 1.05 * reference.forces[k]);
+    }
   }
 
   add(depth: number, force: number): void {
@@ -68,6 +79,17 @@ export class ForceDepthPlot {
       else g.lineTo(X(d), Y(f));
     }
     g.stroke();
+    // The reference: points with their depth uncertainty, inside the plotted range
+    g.strokeStyle = g.fillStyle = "#66dd88";
+    for (let k = 0; k < this.reference.forces.length; k++) {
+      const f = this.reference.forces[k], d = this.reference.indentation[k], u = this.reference.uncertainty[k];
+      if (d > this.dMax || f > this.fMax) continue;
+      g.beginPath();
+      g.moveTo(X(d - u), Y(f));
+      g.lineTo(X(d + u), Y(f));
+      g.stroke();
+      g.fillRect(X(d) - 2.5, Y(f) - 2.5, 5, 5);
+    }
     // Frames, newest brightest
     for (let k = 0; k < this.count; k++) {
       const i = (this.next - this.count + k + this.depths.length) % this.depths.length;
@@ -78,5 +100,9 @@ export class ForceDepthPlot {
     g.fillText("Hertz", w - right - 40, top + 12);
     g.fillStyle = "#ffcc44";
     g.fillText("simulation", w - right - 64, top + 26);
+    if (this.reference.forces.length > 0) {
+      g.fillStyle = "#66dd88";
+      g.fillText("reference", w - right - 60, top + 40);
+    }
   }
 }

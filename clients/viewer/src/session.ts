@@ -26,6 +26,8 @@ export interface SessionInfo {
   workspaceMin: Vec3; // m
   workspaceMax: Vec3;
   freeGuide: boolean;
+  // The server's stored finite-block reference of this scene (empty when it has none).
+  reference: { forces: Float64Array; indentation: Float64Array; uncertainty: Float64Array };
 }
 
 export type FieldName = "displacementMagnitude" | "vonMises" | "none";
@@ -139,6 +141,11 @@ export class ViewerSession {
       workspaceMin: vec3(i.workspaceMin),
       workspaceMax: vec3(i.workspaceMax),
       freeGuide: i.guide === ToolGuide.FREE,
+      reference: {
+        forces: Float64Array.from(i.referenceForces.toArray()),
+        indentation: Float64Array.from(i.referenceIndentation.toArray()),
+        uncertainty: Float64Array.from(i.referenceUncertainty.toArray()),
+      },
     };
     return new ViewerSession(transport, server, opened.session, info);
   }
