@@ -49,7 +49,7 @@ real-time session on the scene at --rate and attaches:
  - one full-rate subscriber (every tick; scalars only: contact force, indenter), on the
    connection that sends the commands;
  - --viewers viewers at 60 Hz with all positions, each on its own connection.
-Every 50 ms it commands a new force (alternating 20 + k % 10 N) and measures the
+Every 50 ms it commands a new force (20 + k % 10 N by default, --force) and measures the
 command-to-stream latency: from sending setForce to receiving the first frame whose
 commandSeq includes it (the client's clock at both ends). After --seconds it reads the
 session's statistics and prints a table, or one JSON object. The benchmark's own
@@ -71,6 +71,18 @@ rss_samples_mb), the recovered blow-ups (recoveries) and what the churn did.
                        where the server's default scene is used)
   --rate HZ            the session's loop rate, (0, 10000] (default 1000)
   --viewers N          60 Hz viewers of all positions, [0, 32] (default 4)
+  --force F            the commanded forces alternate F * (1 + (k % 10) / 20), (0, 1e6] N
+                       (default 20: 20 ... 29 N; the hand-scale scenes want about 0.1)
+  --sessions N         real-time sessions at once, [1, 64] (default 1): the first as above,
+                       each other one opened on a connection of its own with one 60 Hz
+                       viewer of all positions. All are measured over the same window (after
+                       every session has started): the output adds each session's rate,
+                       the fraction of its deadlines missed in the window (late or skipped
+                       ticks) and step time ("sessions"), and the worst session's fraction
+  --server-cpu C       pin the server it starts to CPU C, [0, 1023]: its RPC thread and every
+                       session's loop then share that one core (the capacity of one core)
+  --server-arg ARG     one more argument for the server it starts (repeatable), e.g.
+                       --server-arg --spin-us --server-arg 0
   --connect ADDR:PORT  use this running server instead of starting one
   --server PATH        the server executable to start (default: palpate-server next to
                        this executable)
@@ -86,6 +98,10 @@ struct Args {
   double rate = 1000.0;
   int viewers = 4;
   double soak = 0.0;  // > 0: soak for this many seconds (churn thread on)
+  double force = 20.0;  // N: the commands alternate force * (1 + (k % 10) / 20)
+  int sessions = 1;
+  int server_cpu = -1;  // -1: not pinned
+  std::vector<std::string> server_args;
   std::string connect;
   std::string server;
 };
@@ -107,6 +123,10 @@ Args parse_args(int argc, char** argv) {
       a.rate = args.number();
       if (!(a.rate > 0 && a.rate <= 10000)) throw std::invalid_argument("--rate: must be in (0, 10000] Hz");
     } else if (flag == "--viewers") a.viewers = static_cast<int>(args.integer(0, 32));
+    else if (flag == "--force") a.force = args.number(1e-6, 1e6);
+    else if (flag == "--sessions") a.sessions = static_cast<int>(args.integer(1, 64));
+    else if (flag == "--server-cpu") a.server_cpu = static_cast<int>(args.integer(0, 1023));
+    else if (flag == "--server-arg") a.server_args.push_back(args.value());
     else if (flag == "--connect") a.connect = args.value();
     else if (flag == "--server") a.server = args.value();
     else return false;
@@ -266,9 +286,11 @@ int main(int argc, char** argv) {
   std::unique_ptr<palpate::bench::ServerProcess> child;
   std::string address = a.connect;
   if (address.empty()) {
-    child = std::make_unique<palpate::bench::ServerProcess>(
-        palpate::bench::server_path(a.server, argv[0]),
-        std::vector<std::string>{"--scene", a.scene, "--rate", std::to_string(a.rate)}, "palpate-bench-server");
+    std::vector<std::string> server_args{"--scene", a.scene, "--rate", std::to_string(a.rate), "--max-sessions",
+                                         std::to_string(std::max(16, a.sessions))};
+    server_args.insert(server_args.end(), a.server_args.begin(), a.server_args.end());
+    child = std::make_unique<palpate::bench::ServerProcess>(palpate::bench::server_path(a.server, argv[0]),
+                                                            server_args, "palpate-bench-server", a.server_cpu);
     address = child->address;
   }
 
@@ -321,8 +343,27 @@ int main(int argc, char** argv) {
       viewer_subs.push_back(req.send().wait(ws).getSubscription());
     }
 
+    // --sessions: the others, each on a connection of its own with one 60 Hz viewer.
+    std::vector<std::unique_ptr<capnp::EzRpcClient>> other_connections;
+    std::vector<PalpateServer::Client> other_servers;
+    std::vector<palpate::wire::Subscription::Client> other_subs;
+    std::vector<Session::Client> sessions;
+    sessions.push_back(Session::Client(session));
+    for (int k = 1; k < a.sessions; ++k) {
+      other_connections.push_back(std::make_unique<capnp::EzRpcClient>(address, 7420, options));
+      other_servers.push_back(other_connections.back()->getMain<PalpateServer>());
+      auto req = other_servers.back().openSessionRequest();
+      req.initRequest().setRateHz(a.rate);
+      sessions.push_back(req.send().wait(ws).getSession());
+      auto view = sessions.back().subscribeRequest();
+      view.setSink(kj::heap<Recorder>());
+      view.getOptions().setRateHz(60);
+      view.getOptions().getFields().setPositions(true);
+      other_subs.push_back(view.send().wait(ws).getSubscription());
+    }
+
     // Warm-up, then the measured window: a command every 50 ms.
-    timer.afterDelay((a.soak > 0 ? 5000 : 500) * kj::MILLISECONDS).wait(ws);
+    timer.afterDelay((a.soak > 0 ? 5000 : a.sessions > 1 ? 1000 : 500) * kj::MILLISECONDS).wait(ws);
     const pid_t server_pid = child ? child->pid : -1;
     const double rss_start = server_pid > 0 ? rss_mb(server_pid) : NAN;
     std::vector<double> rss_samples;
@@ -332,16 +373,26 @@ int main(int argc, char** argv) {
     if (a.soak > 0) churn_thread = std::thread([&] { churn(address, session_id, stop_churn, churned); });
     auto last_sample = Clock::now();
     auto last_progress = Clock::now();
-    auto stats0_response = session.statsRequest().send().wait(ws);
-    auto stats0 = stats0_response.getStats();
-    const int64_t ticks0 = stats0.getTicks();
-    const double elapsed0 = stats0.getElapsedSeconds();
+    struct WindowCounts {
+      int64_t ticks = 0;
+      double elapsed_s = 0.0;
+      uint64_t misses = 0, skipped = 0;
+    };
+    auto window_counts = [&](Session::Client& s) {
+      auto response = s.statsRequest().send().wait(ws);
+      const auto st = response.getStats();
+      return WindowCounts{st.getTicks(), st.getElapsedSeconds(), st.getDeadlineMisses(), st.getSkippedTicks()};
+    };
+    std::vector<WindowCounts> window_start;
+    for (auto& s : sessions) window_start.push_back(window_counts(s));
+    const int64_t ticks0 = window_start[0].ticks;
+    const double elapsed0 = window_start[0].elapsed_s;
     const double steal0 = host_steal_seconds();
     std::map<uint64_t, Clock::time_point> sent;
     const auto start = Clock::now();
     for (int k = 0; std::chrono::duration<double>(Clock::now() - start).count() < a.seconds; ++k) {
       auto req = session.setForceRequest();
-      req.setNewtons(20.0 + k % 10);
+      req.setNewtons(a.force * (1.0 + (k % 10) / 20.0));
       const auto t = Clock::now();
       const uint64_t seq = req.send().wait(ws).getSeq();
       sent.emplace(seq, t);
@@ -364,6 +415,33 @@ int main(int argc, char** argv) {
     const double rss_end = server_pid > 0 ? rss_mb(server_pid) : NAN;
     auto stats_response = session.statsRequest().send().wait(ws);
     auto stats = stats_response.getStats();
+    // Every session over the same window: rate, deadline-miss ratio, step time.
+    std::string sessions_json = "[", sessions_table;
+    double worst_miss_ratio = 0.0;
+    for (size_t k = 0; k < sessions.size(); ++k) {
+      auto response = sessions[k].statsRequest().send().wait(ws);
+      const auto st = response.getStats();
+      const WindowCounts& w0 = window_start[k];
+      const double ticks = static_cast<double>(st.getTicks() - w0.ticks);
+      const double seconds = st.getElapsedSeconds() - w0.elapsed_s;
+      const double session_rate = seconds > 0 ? ticks / seconds : 0.0;
+      // The deadlines of the window that were missed: ticks that ended late, and those
+      // skipped when the loop fell more than a period behind.
+      const double skipped = static_cast<double>(st.getSkippedTicks() - w0.skipped);
+      const double deadlines = ticks + skipped;
+      const double ratio =
+          deadlines > 0 ? (static_cast<double>(st.getDeadlineMisses() - w0.misses) + skipped) / deadlines : 1.0;
+      worst_miss_ratio = std::max(worst_miss_ratio, ratio);
+      char line[256];
+      std::snprintf(line, sizeof line,
+                    "%s{\"rate_hz\": %.2f, \"window_missed_deadlines\": %.6f, \"step_p50_us\": %.1f, \"step_p99_us\": %.1f}",
+                    k ? ", " : "", session_rate, ratio, st.getStepUs().getP50(), st.getStepUs().getP99());
+      sessions_json += line;
+      std::snprintf(line, sizeof line, "session %-2zu        %.1f Hz, deadlines missed %.3f %% in the window (late or skipped), step p50 %.0f us, p99 %.0f us\n",
+                    k + 1, session_rate, 100.0 * ratio, st.getStepUs().getP50(), st.getStepUs().getP99());
+      sessions_table += line;
+    }
+    sessions_json += "]";
 
     std::vector<double> latency_ms;
     for (const auto& [seq, t] : sent)
@@ -416,7 +494,8 @@ int main(int argc, char** argv) {
           "\"misses_long_step\": %llu, \"host_steal_s\": %s, \"pinned\": %s, \"skipped_ticks\": %llu, "
           "\"latency_p50_ms\": %.3f, \"latency_p99_ms\": %.3f, \"latency_max_ms\": %.3f, \"commands\": %zu, "
           "\"full_rate_frames\": %llu, \"full_rate_dropped\": %llu, \"dropped_frames\": %s, "
-          "\"viewer_frames\": %s, \"blow_ups\": %u, \"realtime_priority\": %s, \"client_fifo\": %s%s}\n",
+          "\"viewer_frames\": %s, \"blow_ups\": %u, \"realtime_priority\": %s, \"client_fifo\": %s, "
+          "\"server_cpu\": %d, \"sessions\": %s, \"worst_window_missed_deadlines\": %.6f%s}\n",
           a.scene.c_str(), particles, a.seconds, stats.getTargetRateHz(), rate,
           static_cast<long long>(stats.getTicks()), step.getP50(), step.getP99(), step.getMax(), late.getP50(),
           late.getP99(), late.getMax(), static_cast<unsigned long long>(stats.getDeadlineMisses()), miss_ratio,
@@ -426,7 +505,8 @@ int main(int argc, char** argv) {
           percentile(latency_ms, 0.99), percentile(latency_ms, 1.0), latency_ms.size(),
           static_cast<unsigned long long>(recorder.frames), static_cast<unsigned long long>(full_rate_dropped),
           list(dropped).c_str(), list(received).c_str(), stats.getBlowUps(),
-          stats.getRealtimePriority() ? "true" : "false", client_fifo ? "true" : "false", soak_json.c_str());
+          stats.getRealtimePriority() ? "true" : "false", client_fifo ? "true" : "false", a.server_cpu,
+          sessions_json.c_str(), worst_miss_ratio, soak_json.c_str());
     } else {
       std::printf("scene %s (%u particles), %.0f s at %.0f Hz target, 1 full-rate subscriber + %d viewers at 60 Hz\n",
                   a.scene.c_str(), particles, a.seconds, stats.getTargetRateHz(), a.viewers);
@@ -448,6 +528,7 @@ int main(int argc, char** argv) {
       std::printf("full-rate frames  %llu received, %llu dropped\n", static_cast<unsigned long long>(recorder.frames),
                   static_cast<unsigned long long>(full_rate_dropped));
       std::printf("viewer frames     received %s, dropped %s\n", list(received).c_str(), list(dropped).c_str());
+      if (a.sessions > 1) std::printf("%s", sessions_table.c_str());
       if (a.soak > 0) {
         std::printf("server memory     %.1f MB after warm-up, %.1f MB at the end\n", rss_start, rss_end);
         std::printf("recoveries        %u blow-ups recovered\n", stats.getBlowUps());

@@ -2,6 +2,7 @@
 // palpate-server as a child process of a benchmark (palpate-bench-server,
 // palpate-bench-haptic), listening on 127.0.0.1:<a port the system picks>.
 #include <limits.h>
+#include <sched.h>
 #include <signal.h>
 #include <sys/types.h>
 #include <sys/wait.h>
@@ -32,7 +33,8 @@ class ServerProcess {
   // "listening on ADDR:PORT" line. The server validates and builds its default scene
   // before it listens (seconds for the finer study scenes): waits up to 120 s, else
   // prints "PROGRAM: the server did not start (PATH)" and exits with status 1.
-  ServerProcess(const std::string& path, const std::vector<std::string>& args, const char* program) {
+  // cpu >= 0 pins the server (every thread it will start) to that CPU.
+  ServerProcess(const std::string& path, const std::vector<std::string>& args, const char* program, int cpu = -1) {
     int out[2];
     if (pipe(out) != 0) std::exit(1);
     std::vector<std::string> argv_text = {path, "--listen", "127.0.0.1:0"};
@@ -42,6 +44,15 @@ class ServerProcess {
     argv.push_back(nullptr);
     pid = fork();
     if (pid == 0) {
+      if (cpu >= 0) {
+        cpu_set_t set;
+        CPU_ZERO(&set);
+        CPU_SET(cpu, &set);
+        if (sched_setaffinity(0, sizeof set, &set) != 0) {
+          std::fprintf(stderr, "%s: cannot pin the server to CPU %d\n", program, cpu);
+          _exit(127);
+        }
+      }
       dup2(out[1], STDOUT_FILENO);
       close(out[0]);
       close(out[1]);

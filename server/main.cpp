@@ -4,8 +4,9 @@
 // Wiring, in order: options -> the default scene validated and built (a scene that
 // cannot be served stops here, status 1, before anything listens) -> event loop ->
 // listener -> ServerContext + bootstrap ServerImpl -> accept loop -> "listening" line
-// -> wait for a signal -> stop every simulation thread -> drop the connections ->
-// drop the event loop.
+// -> (--agones) Ready, then health pings -> wait for a signal -> stop the pings -> stop
+// every simulation thread -> close the sessions -> (--agones) Shutdown -> drop the
+// connections -> drop the event loop.
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <sys/socket.h>
@@ -34,6 +35,7 @@
 
 #include "cli/arguments.h"
 #include "core/model.h"
+#include "server/agones.h"
 #include "server/connection.h"
 #include "server/session.h"
 #include "server/web.h"
@@ -83,11 +85,24 @@ loop, or headless stepping on request. Once it accepts connections it prints one
                        behind; 0 keeps the system's (default 262144)
   --max-sessions N     sessions at a time, [1, 1024] (default 16)
   --max-particles N    largest cloud a session may have, [8, 8000000] (default 200000)
+  --agones             run as an Agones GameServer: tell the Agones SDK sidecar (REST on
+                       localhost, port AGONES_SDK_HTTP_PORT, default 9358) POST /ready once
+                       listening (retried until the sidecar answers), POST /health every
+                       --agones-health-seconds while every real-time session holds its
+                       rate (the /healthz judgement; the pings stop while one does not, so
+                       Agones replaces the server), and POST /shutdown on SIGINT/SIGTERM
+                       after the sessions were closed (README.md, "Sessions on Kubernetes
+                       with Agones")
+  --agones-port PORT   the sidecar's REST port, [1, 65535] (default: AGONES_SDK_HTTP_PORT,
+                       else 9358)
+  --agones-health-seconds S
+                       period of the health pings, [0.2, 3600] s (default 2); the Fleet's
+                       health.periodSeconds should match it
   --log-level LEVEL    trace, debug, info, warn, error or off (default warn)
   --help               print this text and exit
 Exit status: 0 after SIGINT or SIGTERM; 1 when the default scene cannot be served (the
 message names the file, the field and the reason) or the address cannot be used; 2 for a
-wrong argument.
+wrong argument (or, with --agones, an AGONES_SDK_HTTP_PORT that is not a port).
 )";
 
 struct HostPort {
@@ -116,6 +131,9 @@ struct Args {
   std::string log_level = "warn";
   int sndbuf = 256 * 1024;
   ServerOptions options;
+  bool agones = false;
+  std::optional<unsigned> agones_port;  // --agones-port; else from the environment
+  palpate::server::AgonesOptions agones_options;
 };
 
 Args parse_args(int argc, char** argv) {
@@ -158,6 +176,12 @@ Args parse_args(int argc, char** argv) {
       a.options.max_particles = args.integer(8, 8000000);
     } else if (flag == "--max-sessions") {
       a.options.max_sessions = static_cast<int>(args.integer(1, 1024));
+    } else if (flag == "--agones") {
+      a.agones = true;
+    } else if (flag == "--agones-port") {
+      a.agones_port = static_cast<unsigned>(args.integer(1, 65535));
+    } else if (flag == "--agones-health-seconds") {
+      a.agones_options.health_period_s = args.number(0.2, 3600);
     } else if (flag == "--log-level") {
       a.log_level = args.value();
       if (a.log_level != "off" && spdlog::level::from_str(a.log_level) == spdlog::level::off)
@@ -223,6 +247,14 @@ int main(int argc, char** argv) {
   spdlog::set_level(spdlog::level::from_str(args.log_level));
   spdlog::set_default_logger(spdlog::stderr_color_mt("palpate-server"));
   spdlog::set_level(spdlog::level::from_str(args.log_level));
+  if (args.agones) {
+    try {
+      args.agones_options.port = args.agones_port ? *args.agones_port : palpate::server::agones_port_from_environment();
+    } catch (const std::invalid_argument& e) {
+      std::fprintf(stderr, "palpate-server: --agones: %s\n", e.what());
+      return 2;
+    }
+  }
   if (!check_default_scene(args.options)) return 1;
   std::signal(SIGPIPE, SIG_IGN);
   // Before any thread exists: the signals are blocked and delivered to the event loop.
@@ -287,7 +319,7 @@ int main(int argc, char** argv) {
                        args.web.root.string());
         palpate::server::WebProbes probes;
         probes.ready = [] { return palpate::server::Probe{true, "ok: the default scene is valid"}; };
-        probes.health = [&ctx] { return ctx.health_probe(); };
+        probes.health = [&ctx, window = palpate::server::HealthWindow{}]() mutable { return ctx.health_probe(window); };
         web = kj::heap<palpate::server::WebServer>(io.provider->getTimer(), args.web, std::move(probes), bootstrap,
                                                    args.sndbuf);
         web_accepting = web->listen(*web_listener).eagerlyEvaluate([](kj::Exception&& e) {
@@ -299,11 +331,24 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
       spdlog::info("scene dir {}, default scene {}, {} Hz", ctx.options.scene_dir.string(),
                    ctx.options.default_scene.string(), ctx.options.rate_hz);
+      // --agones: Ready now that it listens, then the health pings (their own judgement
+      // window: /healthz probes do not disturb it).
+      kj::Own<palpate::server::AgonesLifecycle> agones;
+      kj::Promise<void> agones_running = kj::READY_NOW;
+      if (args.agones) {
+        agones = kj::heap<palpate::server::AgonesLifecycle>(
+            io.provider->getTimer(), io.provider->getNetwork(), args.agones_options,
+            [&ctx, window = palpate::server::HealthWindow{}]() mutable { return ctx.health_probe(window); });
+        agones_running = agones->run().eagerlyEvaluate([](kj::Exception&& e) {
+          spdlog::error("Agones lifecycle ended: {}", e.getDescription().cStr());
+        });
+      }
 
       auto sigint = io.unixEventPort.onSignal(SIGINT).then([](siginfo_t) { return SIGINT; });
       auto sigterm = io.unixEventPort.onSignal(SIGTERM).then([](siginfo_t) { return SIGTERM; });
       const int sig = sigint.exclusiveJoin(kj::mv(sigterm)).wait(io.waitScope);
       spdlog::info("signal {}: shutting down {} session(s)", sig, ctx.sessions.size());
+      agones_running = nullptr;  // no health ping from here on
 
       // Simulation threads first, while the loop still exists (docs/protocol.md, "Shutdown"),
       // then every subscriber is told (FrameSink.done), for at most a second.
@@ -311,6 +356,8 @@ int main(int argc, char** argv) {
       ctx.close_all("server shutting down")
           .exclusiveJoin(io.provider->getTimer().afterDelay(1 * kj::SECONDS))
           .wait(io.waitScope);
+      // Then Agones is told (bounded by the call's timeout, 2 s).
+      if (agones) agones->shutdown().wait(io.waitScope);
       accepting = nullptr;
       web_accepting = nullptr;
       web = nullptr;

@@ -757,32 +757,41 @@ int ServerContext::next_loop_cpu(bool headless) {
   return cpu;
 }
 
-Probe ServerContext::health_probe(double min_rate_fraction, double max_miss_fraction) {
+Probe ServerContext::health_probe(HealthWindow& window, double min_rate_fraction, double max_miss_fraction) {
   Probe probe;
-  std::map<uint32_t, HealthSample> samples;
+  std::map<uint32_t, HealthWindow::Sample> samples;
   int realtime = 0;
   for (const auto& [id, s] : sessions) {
     const Simulation& sim = s->simulation();
     if (s->closed() || sim.config().headless || sim.phase() != Phase::ready || sim.status().paused) continue;
     ++realtime;
     const SimCounters c = sim.counters();
-    HealthSample now{c.ticks, c.elapsed_s, c.deadline_misses};
-    // Over the time since the previous probe (or since the session started).
-    HealthSample before{};
-    if (auto it = health_samples_.find(id); it != health_samples_.end()) before = it->second;
-    samples[id] = now;
-    const double seconds = now.elapsed_s - before.elapsed_s;
-    const double ticks = static_cast<double>(now.ticks - before.ticks);
-    if (seconds < 0.2) continue;  // too short to judge
-    const double rate = ticks / seconds, target = sim.config().rate_hz;
-    const double misses = ticks > 0 ? static_cast<double>(now.deadline_misses - before.deadline_misses) / ticks : 1.0;
-    if (rate < min_rate_fraction * target || misses > max_miss_fraction) {
-      probe.ok = false;
-      probe.detail += "session " + std::to_string(id) + ": " + std::to_string(rate) + " Hz of " +
+    HealthWindow::Sample now{c.ticks, c.elapsed_s, c.deadline_misses, ""};
+    // Over the time since this window's previous probe (or since the session started).
+    HealthWindow::Sample before{};
+    const auto it = window.samples_.find(id);
+    if (it != window.samples_.end()) before = it->second;
+    const double seconds = now.elapsed_s - before.elapsed_s, target = sim.config().rate_hz;
+    if (seconds < kMinJudgedSeconds || seconds * target < kMinJudgedTicks) {
+      // Too short to judge: the previous verdict stands; the longer interval is judged next time.
+      if (it != window.samples_.end()) samples[id] = before;
+      now.failure = before.failure;
+    } else {
+      const double ticks = static_cast<double>(now.ticks - before.ticks);
+      const double rate = ticks / seconds;
+      const double misses =
+          ticks > 0 ? static_cast<double>(now.deadline_misses - before.deadline_misses) / ticks : 1.0;
+      if (rate < min_rate_fraction * target || misses > max_miss_fraction)
+        now.failure = "session " + std::to_string(id) + ": " + std::to_string(rate) + " Hz of " +
                       std::to_string(target) + " Hz, deadline misses " + std::to_string(100.0 * misses) + " %; ";
+      samples[id] = now;
+    }
+    if (!now.failure.empty()) {
+      probe.ok = false;
+      probe.detail += now.failure;
     }
   }
-  health_samples_ = std::move(samples);
+  window.samples_ = std::move(samples);
   if (probe.ok) probe.detail = "ok: " + std::to_string(realtime) + " real-time session(s) hold their rate";
   return probe;
 }

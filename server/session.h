@@ -22,6 +22,21 @@ namespace palpate::server {
 
 class SessionImpl;
 
+// What one asker of ServerContext::health_probe saw at its previous probe. Each asker
+// (the /healthz endpoint, the Agones pinger) keeps its own, so that one's probes never
+// shorten or reset the interval another one judges. RPC thread only.
+class HealthWindow {
+ private:
+  friend struct ServerContext;
+  struct Sample {
+    int64_t ticks = 0;
+    double elapsed_s = 0.0;
+    uint64_t deadline_misses = 0;
+    std::string failure;  // the verdict on the interval that ended here: empty when it held
+  };
+  std::map<uint32_t, Sample> samples_;  // by session id, at this asker's previous probe
+};
+
 // Shared by every connection: options, the live sessions (for shutdown) and a
 // TaskSet for fire-and-forget calls. RPC thread only.
 struct ServerContext {
@@ -44,11 +59,17 @@ struct ServerContext {
   // --no-pin, or a single core).
   int next_loop_cpu(bool headless);
 
-  // /healthz (server/web.h): healthy while every running real-time session held, since
-  // the previous probe, at least min_rate_fraction of its rate with at most
-  // max_miss_fraction of its ticks missing their deadline (paused and headless sessions
-  // are not judged; an interval under 0.2 s is not judged).
-  Probe health_probe(double min_rate_fraction = 0.9, double max_miss_fraction = 0.05);
+  // /healthz (server/web.h) and the Agones health pings (server/agones.h): healthy while
+  // every running real-time session held, since the previous probe with the same
+  // `window` (or since it started), at least min_rate_fraction of its rate with at most
+  // max_miss_fraction of its ticks missing their deadline. Paused and headless sessions
+  // are not judged. Nor is an interval shorter than kMinJudgedSeconds or kMinJudgedTicks
+  // periods of the session's rate (too few ticks: one miss would be a large fraction):
+  // then the window's previous verdict on the session stands, and the next probe judges
+  // the longer interval.
+  static constexpr double kMinJudgedSeconds = 0.1;
+  static constexpr double kMinJudgedTicks = 100;
+  Probe health_probe(HealthWindow& window, double min_rate_fraction = 0.9, double max_miss_fraction = 0.05);
 
   // A session whose last reference went while its thread was still starting
   // (validating, reading files, building): cancelled and kept, without waiting for
@@ -64,13 +85,7 @@ struct ServerContext {
   struct ErrorHandler : kj::TaskSet::ErrorHandler {
     void taskFailed(kj::Exception&& e) override;
   } error_handler_;
-  struct HealthSample {
-    int64_t ticks = 0;
-    double elapsed_s = 0.0;
-    uint64_t deadline_misses = 0;
-  };
-  std::map<uint32_t, HealthSample> health_samples_;
-  int next_loop_core_ = 0;  // by session id, at the previous probe
+  int next_loop_core_ = 0;  // the next real-time loop's turn (next_loop_cpu)
   std::set<Closing*> closing_;  // declared before tasks_: a Closing (held by a task) erases itself
   kj::TaskSet tasks_{error_handler_};
 };

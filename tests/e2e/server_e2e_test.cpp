@@ -38,6 +38,8 @@
 #include <kj/timer.h>
 
 #include "protocol/palpate.capnp.h"
+#include "tests/e2e/open_session.h"
+#include "tests/e2e/server_process.h"
 #include "tests/run_program.h"
 
 namespace {
@@ -63,96 +65,9 @@ using palpate::wire::PalpateServer;
 using palpate::wire::Session;
 
 // ---------------------------------------------------------------------------
-// The server process.
+// The server process (tests/e2e/server_process.h).
 
-class ServerProcess {
- public:
-  ServerProcess() {
-    int out[2];
-    if (pipe(out) != 0) std::abort();
-    pid_ = fork();
-    if (pid_ == 0) {
-      prctl(PR_SET_PDEATHSIG, SIGKILL);  // no orphan server when the test aborts (e.g. a sanitizer report)
-      dup2(out[1], STDOUT_FILENO);
-      close(out[0]);
-      close(out[1]);
-      execl(PALPATE_SERVER_BIN, PALPATE_SERVER_BIN, "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--scene-dir",
-            PALPATE_SOURCE_DIR "/scenes", "--log-level", "error", static_cast<char*>(nullptr));
-      _exit(127);
-    }
-    close(out[1]);
-    // Readiness: the "listening on 127.0.0.1:PORT" and "web on http://127.0.0.1:PORT/"
-    // lines (bounded wait).
-    std::string line;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-    fcntl(out[0], F_SETFL, O_NONBLOCK);
-    while (line.find("/\n") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
-      char buf[256];
-      const ssize_t n = read(out[0], buf, sizeof buf);
-      if (n > 0) line.append(buf, static_cast<size_t>(n));
-      else if (n == 0) break;
-      else std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    stdout_fd_ = out[0];
-    const auto first = line.substr(0, line.find('\n'));
-    const auto colon = first.rfind(':');
-    const auto web = line.find("web on http://127.0.0.1:");
-    if (first.find("listening on") == std::string::npos || colon == std::string::npos || web == std::string::npos) {
-      std::fprintf(stderr, "server did not start: '%s'\n", line.c_str());
-      std::abort();
-    }
-    port_ = std::stoi(first.substr(colon + 1));
-    web_port_ = std::stoi(line.substr(web + std::string("web on http://127.0.0.1:").size()));
-  }
-  ~ServerProcess() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-    close(stdout_fd_);
-  }
-  int port() const { return port_; }
-  int web_port() const { return web_port_; }
-  pid_t pid() const { return pid_; }
-  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
-  bool alive() const { return kill(pid_, 0) == 0 && waitpid(pid_, nullptr, WNOHANG) == 0; }
-  long rss_kb() const { return status_field("VmRSS:"); }
-  long threads() const { return status_field("Threads:"); }
-  // SIGTERM; the exit status, or -1 if it did not exit within the timeout.
-  int terminate(std::chrono::milliseconds timeout) {
-    kill(pid_, SIGTERM);
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (std::chrono::steady_clock::now() < deadline) {
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return -1;
-  }
-
- private:
-  long status_field(const std::string& name) const {
-    std::ifstream f("/proc/" + std::to_string(pid_) + "/status");
-    std::string key;
-    long value = -1;
-    while (f >> key) {
-      if (key == name) {
-        f >> value;
-        break;
-      }
-      std::getline(f, key);
-    }
-    return value;
-  }
-
-  pid_t pid_ = -1;
-  int stdout_fd_ = -1;
-  int port_ = 0;
-  int web_port_ = 0;
-};
+using palpate::test::ServerProcess;
 
 ServerProcess* g_server = nullptr;
 
@@ -216,17 +131,7 @@ class RecordingSink final : public FrameSink::Server {
   }
 };
 
-// hertz_cube with overrides ("key=value"), over either transport.
-Session::Client open_session(PalpateServer::Client& server, kj::WaitScope& ws, bool headless,
-                             const std::vector<std::string>& overrides = {"body.distribution.per_edge=8"}) {
-  auto req = server.openSessionRequest();
-  auto r = req.initRequest();
-  r.getScene().setName("hertz_cube");
-  auto o = r.initOverrides(static_cast<unsigned>(overrides.size()));
-  for (unsigned k = 0; k < overrides.size(); ++k) o.set(k, overrides[k]);
-  r.setHeadless(headless);
-  return req.send().wait(ws).getSession();
-}
+using palpate::test::open_session;
 
 // A client in a thread of its own that opens a real-time session, subscribes to every
 // tick's positions and then never reads (its thread stops running its event loop) until
