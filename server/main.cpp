@@ -75,9 +75,11 @@ loop, or headless stepping on request. Once it accepts connections it prints one
                        (default 200)
   --no-realtime        do not ask for SCHED_FIFO (by default the loops get priority 10
                        and the RPC thread 5 when the system allows it)
-  --no-pin             do not pin threads (by default, with two cores or more, each real-time
-                       loop runs on one of cores 1 ... n-1 in turn and the RPC thread, the
-                       contact-stiffness workers and headless sessions on core 0)
+  --pin                pin threads: with two cores or more, each real-time loop runs on one of
+                       cores 1 ... n-1 in turn and the RPC thread, the contact-stiffness
+                       workers and headless sessions on core 0 (off by default: on the shared
+                       VMs measured so far it did not lower the misses, server/README.md)
+  --no-pin             do not pin threads (the default)
   --no-lock-memory     do not lock the server's memory (by default mlockall keeps every page
                        resident, so no tick waits for a page fault; refused without the
                        privilege: a warning, and it runs unlocked)
@@ -166,6 +168,8 @@ Args parse_args(int argc, char** argv) {
       a.options.spin_margin_us = args.number(0, 1e6);
     } else if (flag == "--no-realtime") {
       a.options.try_realtime = false;
+    } else if (flag == "--pin") {
+      a.options.pin_threads = true;
     } else if (flag == "--no-pin") {
       a.options.pin_threads = false;
     } else if (flag == "--no-lock-memory") {

@@ -26,7 +26,7 @@ struct ServerOptions {
   double rate_hz = 1000.0;
   double spin_margin_us = 200.0;
   bool try_realtime = true;
-  bool pin_threads = true;              // real-time loops on cores of their own (see SimConfig::cpu)
+  bool pin_threads = false;             // real-time loops on cores of their own (--pin; SimConfig::cpu)
   int checkpoint_interval = 100;
   int max_sessions = 16;                // concurrent sessions (each owns a thread and a model)
   int64_t max_particles = 200000;       // clouds refused beyond this (memory bound per session)

@@ -56,7 +56,7 @@ struct ServerContext {
   void add_task(kj::Promise<void> task) { tasks_.add(kj::mv(task)); }
 
   // The core a new session's real-time loop pins itself to: 1 ... n-1 in turn (-1: headless,
-  // --no-pin, or a single core).
+  // no --pin, or a single core).
   int next_loop_cpu(bool headless);
 
   // /healthz (server/web.h) and the Agones health pings (server/agones.h): healthy while

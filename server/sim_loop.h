@@ -64,7 +64,7 @@ struct SimConfig {
   bool try_realtime = true;       // ask for SCHED_FIFO (silently refused when not allowed)
   // The core the real-time loop pins itself to (-1: none). The server gives each real-time
   // session one of cores 1 ... n-1 in turn and keeps the RPC thread, the stiffness workers
-  // and headless sessions on the others (palpate-server --no-pin turns it off).
+  // and headless sessions on the others (palpate-server --pin turns it on).
   int cpu = -1;
   int checkpoint_interval = 100;  // ticks between checkpoints of the last good state
   DeviceLimits device;            // OpenRequest.device
