@@ -20,7 +20,7 @@
 # contact).
 #   --out DIR     output folder (default docs/verification/neo_hookean_depth)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
-# built there (Release) if missing.
+# built there (Release) when stale, through scripts/build.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -39,10 +39,7 @@ done
 BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
-if [[ ! -x "$verify" || ! -x "$reference" ]]; then
-  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
-  cmake --build "$BUILD_DIR" -j2 --target palpate-verify palpate-reference
-fi
+BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-reference >/dev/null  # Release, only if stale
 mkdir -p "$out"
 scene=scenes/palpation_block_neo.json
 ref=scenes/references/palpation_block_large_strain.json

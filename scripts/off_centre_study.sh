@@ -17,7 +17,7 @@
 #   --quick       three forces and the haptic clouds only (seconds)
 #   --out DIR     output folder (default docs/verification/off_centre)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
-# built there (Release) if missing.
+# built there (Release) when stale, through scripts/build.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -38,10 +38,7 @@ done
 BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
-if [[ ! -x "$verify" || ! -x "$reference" ]]; then
-  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
-  cmake --build "$BUILD_DIR" -j2 --target palpate-verify palpate-reference
-fi
+BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-reference >/dev/null  # Release, only if stale
 mkdir -p "$out"
 sites=("0,0" "0.4,0.3" "0.5,0")
 forces=()

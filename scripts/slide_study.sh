@@ -30,10 +30,7 @@ done
 
 BUILD_DIR=${BUILD_DIR:-build}
 slide="$BUILD_DIR/bin/palpate-slide"
-if [[ ! -x "$slide" ]]; then
-  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null
-  cmake --build "$BUILD_DIR" -j2 --target palpate-slide
-fi
+BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-slide >/dev/null  # Release, only if stale
 mkdir -p "$out"
 force=82.88
 speeds=1,0.1,0.01,0.001

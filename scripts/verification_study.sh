@@ -50,11 +50,8 @@ python=/usr/bin/python3  # Debian's, which sees python3-numpy and python3-matplo
 scene=scenes/hertz_cube.json        # MLS
 fem_scene=scenes/hertz_cube_fem.json  # hex FEM, same block, material, indenter and reference
 
-if [[ ! -x "$verify" || ! -x "$stable_dt" || ! -x "$bench" ]]; then
-  echo "== building palpate-verify, palpate-stable-dt and palpate-bench-step (Release) in $BUILD_DIR" >&2
-  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release >/dev/null &&
-    cmake --build "$BUILD_DIR" -j1 --target palpate-verify palpate-stable-dt palpate-bench-step >/dev/null || exit 1
-fi
+echo "== building palpate-verify, palpate-stable-dt and palpate-bench-step (Release) in $BUILD_DIR, if stale" >&2
+BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-stable-dt palpate-bench-step >/dev/null || exit 1
 
 mkdir -p "$out/raw"
 manifest="$out/raw/runs.tsv"
