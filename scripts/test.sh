@@ -30,12 +30,13 @@ step() { echo "== test.sh --sanitize: $* ($(date +%T))"; }
 step "ASan + UBSan build (build-asan)"
 cmake -S . -B build-asan "${flags[@]}" -DPALPATE_SANITIZE=address,undefined >/dev/null
 cmake --build build-asan -j"$jobs"
-# Wall-clock tests stay in the Release suite: the stalled-client e2e test holds a
+# Wall-clock tests stay in the Release suite: the stalled-client e2e tests (TCP and
+# WebSocket; a sanitized WebSocket subscriber got 89 frames in 1.5 s where 250 were asked) hold a
 # 1 kHz session to rate limits a sanitized build cannot meet on 2 cores (441 s, failed
 # once under ASan); the command-latency test expects the sphere back in contact
 # within 100 ms of wall time (failed once under ASan: it had not landed yet); the
 # palpate-stress smoke run outgrows its 120 s limit at ASan's speed.
-wall_clock='-ServerE2E.StalledAndVanishingClientsCostOthersNothing:ServerE2E.ForceCommandReachesTheStreamWithinTwoTicks'
+wall_clock='-ServerE2E.StalledAndVanishingClientsCostOthersNothing:ServerWebSocket.ANeverReadingClientCostsOthersNothing:ServerE2E.ForceCommandReachesTheStreamWithinTwoTicks'
 # The e2e tests that remain still run a real-time session against the wall clock:
 # a test that fails is run once more (ctest --repeat until-pass:2) and the suite
 # fails only if it fails twice; the log shows every failure.

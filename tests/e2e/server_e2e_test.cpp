@@ -1363,31 +1363,40 @@ TEST(ServerWebSocket, OriginPathAndStaticFilesAreChecked) {
   EXPECT_EQ(post.read_all(2000, true).rfind("HTTP/1.1 405", 0), 0u);
 }
 
-TEST(ServerWebSocket, GarbageOversizedAndNeverReadingClientsCostOthersNothing) {
-  // A WebSocket client that subscribes to every tick's positions and never reads.
-  StalledSubscriber<WsClient> stalled;
-  // A full-rate subscriber over WebSocket, measured while the others misbehave.
-  WsClient c;
-  auto session = open_session(c.server, c.ws(), false);
-  auto sink_owner = kj::heap<RecordingSink>();
-  RecordingSink& sink = *sink_owner;
-  FrameSink::Client sink_cap = kj::mv(sink_owner);
-  auto sub = session.subscribeRequest();
-  sub.setSink(sink_cap);
-  sub.getOptions().setRateHz(0);
-  auto handle = sub.send().wait(c.ws()).getSubscription();
+// A full-rate subscriber (every tick, scalars only) over WebSocket on a session of its own.
+struct WsFullRateSubscriber {
+  WsFullRateSubscriber() : session(open_session(client.server, client.ws(), false)) {
+    auto owner = kj::heap<RecordingSink>();
+    sink = owner.get();
+    sink_cap = kj::mv(owner);
+    auto sub = session.subscribeRequest();
+    sub.setSink(sink_cap);
+    sub.getOptions().setRateHz(0);
+    handle = sub.send().wait(client.ws()).getSubscription();
+  }
+  double achieved_rate() { return session.statsRequest().send().wait(client.ws()).getStats().getAchievedRateHz(); }
+  WsClient client;
+  Session::Client session;
+  RecordingSink* sink = nullptr;
+  FrameSink::Client sink_cap = nullptr;  // held here: the sink outlives the server's reference
+  palpate::wire::Subscription::Client handle = nullptr;
+};
 
+// Bytes that are not WebSocket, not Cap'n Proto, or too large end their own connection
+// only: a subscriber keeps getting finite frames, and both transports still answer. (No
+// wall-clock threshold: this one runs under the sanitizers too.)
+TEST(ServerWebSocket, GarbageAndOversizedMessagesEndOnlyTheirConnection) {
+  WsFullRateSubscriber c;
   std::mt19937 rng(7);
   auto junk = [&](size_t n) {
     std::string s(n, '\0');
     for (auto& b : s) b = static_cast<char>(rng());
     return s;
   };
-  std::vector<std::string> replies;
   {  // garbage before any handshake
     RawSocket s;
     s.send(junk(4096));
-    replies.push_back(s.read_all(500));
+    s.read_all(500);
   }
   {  // a handshake, then binary frames that are not capnp messages, then a text frame
     RawSocket s;
@@ -1395,13 +1404,13 @@ TEST(ServerWebSocket, GarbageOversizedAndNeverReadingClientsCostOthersNothing) {
     s.send(client_frame(0x2, junk(64), 64));
     s.send(client_frame(0x2, std::string(8, '\xff'), 8));  // an absurd segment count
     s.send(client_frame(0x1, "hello", 5));
-    replies.push_back(s.read_all(500));
+    s.read_all(500);
   }
   {  // an oversized message (2 MiB > the 1 MiB limit)
     RawSocket s;
     s.send(upgrade_request("/rpc", ""));
     s.send(client_frame(0x2, junk(4096), 2u << 20));
-    replies.push_back(s.read_all(500));
+    s.read_all(500);
   }
   {  // a frame header announcing 2^62 bytes, and nothing after it
     RawSocket s;
@@ -1409,29 +1418,39 @@ TEST(ServerWebSocket, GarbageOversizedAndNeverReadingClientsCostOthersNothing) {
     std::string header = "\x82\xff";
     header += std::string("\x40\0\0\0\0\0\0\0", 8);
     s.send(header + "abcd");
-    replies.push_back(s.read_all(500));
+    s.read_all(500);
   }
-  sink.frames.clear();
-  c.pump(1500);
-  const double rate = session.statsRequest().send().wait(c.ws()).getStats().getAchievedRateHz();
-  stalled.release();
-  EXPECT_GT(rate, kMinRateHz);
-  EXPECT_GT(sink.frames.size(), kMinFullRateFrames) << "a WebSocket subscriber lost frames to misbehaving neighbours";
-  for (const auto& f : sink.frames) EXPECT_TRUE(f.finite);
+  c.sink->frames.clear();
+  c.client.pump(300);
+  EXPECT_GT(c.sink->frames.size(), 0u) << "the subscriber's stream stopped";
+  for (const auto& f : c.sink->frames) EXPECT_TRUE(f.finite);
   EXPECT_TRUE(g_server->alive());
-  // The server still answers both transports.
-  uint32_t tcp_version = 0;
-  std::thread([&] {
+  uint32_t tcp_version = 0, ws_version = 0;
+  std::thread([&] {  // one event loop per thread
     Client tcp;
     tcp_version = tcp.server.versionRequest().send().wait(tcp.ws()).getProtocolVersion();
   }).join();
-  EXPECT_EQ(tcp_version, palpate::wire::PROTOCOL_VERSION);
-  uint32_t ws_version = 0;
   std::thread([&] {
     WsClient after;
     ws_version = after.server.versionRequest().send().wait(after.ws()).getProtocolVersion();
   }).join();
+  EXPECT_EQ(tcp_version, palpate::wire::PROTOCOL_VERSION);
   EXPECT_EQ(ws_version, palpate::wire::PROTOCOL_VERSION);
+}
+
+// A WebSocket client that subscribes to every tick's positions and never reads costs a
+// full-rate WebSocket subscriber of another session nothing (the wall-clock twin of
+// StalledAndVanishingClientsCostOthersNothing; like it, left out of sanitized runs).
+TEST(ServerWebSocket, ANeverReadingClientCostsOthersNothing) {
+  StalledSubscriber<WsClient> stalled;
+  WsFullRateSubscriber c;
+  c.sink->frames.clear();
+  c.client.pump(1500);
+  const double rate = c.achieved_rate();
+  stalled.release();
+  EXPECT_GT(rate, kMinRateHz);
+  EXPECT_GT(c.sink->frames.size(), kMinFullRateFrames) << "a WebSocket subscriber lost frames to a stalled neighbour";
+  EXPECT_TRUE(g_server->alive());
 }
 
 }  // namespace
