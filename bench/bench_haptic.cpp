@@ -47,6 +47,10 @@ median: tail figures swing on a shared machine.
                        server's default scene is used)
   --rate HZ            the server loop's rate, (0, 10000] (default 1000)
   --set KEY=VALUE      override a scene field of the session (repeatable)
+  --server-haptic-rate HZ  multirate (OpenRequest.hapticRateHz): the server renders
+                       the force at this rate from the newest step's local model while
+                       the model steps at --rate; the client sends a setPosition per
+                       render tick. 0 = off (default)
   --depth M            device depth below first touch, m, > 0 (default R/5)
   --device-stiffness K the device's largest stiffness, N/m, >= 0 (default 0: none)
   --device-damping B   the device's largest damping, N s/m, >= 0 (default 0: none)
@@ -70,6 +74,7 @@ struct Args {
   int repeat = 1;
   std::string scene = default_scene();
   double rate = 1000.0;
+  double server_haptic_rate = 0.0;
   std::vector<std::string> overrides;
   palpate::haptic::DeviceFlags haptic{4000.0};
   std::string connect;
@@ -89,6 +94,10 @@ Args parse_args(int argc, char** argv) {
     else if (flag == "--rate") {
       a.rate = args.number();
       if (!(a.rate > 0 && a.rate <= 10000)) throw std::invalid_argument("--rate: must be in (0, 10000] Hz");
+    } else if (flag == "--server-haptic-rate") {
+      a.server_haptic_rate = args.number();
+      if (!(a.server_haptic_rate >= 0 && a.server_haptic_rate <= 10000))
+        throw std::invalid_argument("--server-haptic-rate: must be in [0, 10000] Hz");
     } else if (flag == "--set") {
       const std::string assignment = args.value();
       palpate::cli::scene_override(assignment);
@@ -137,6 +146,7 @@ int main(int argc, char** argv) {
       auto req = open.initRequest();
       auto o = req.initOverrides(static_cast<unsigned>(a.overrides.size()));
       for (unsigned k = 0; k < a.overrides.size(); ++k) o.set(k, a.overrides[k]);
+      req.setHapticRateHz(a.server_haptic_rate);
       palpate::haptic::set_device(req, a.haptic.device_stiffness, a.haptic.device_damping, a.haptic.device_force);
       auto opened = open.send().wait(ws);
       auto info = opened.getInfo();

@@ -256,6 +256,8 @@ void RenderingError::reserve(size_t frames) {
   for (auto& v : hold_) v.reserve(frames / hold_.size() + 16);
   local_.back().reserve(frames);
   hold_.back().reserve(frames);
+  late_local_.reserve(frames / 8 + 16);
+  late_hold_.reserve(frames / 8 + 16);
 }
 
 void RenderingError::on_frame(const Frame& f, size_t segment) {
@@ -273,6 +275,11 @@ void RenderingError::on_frame(const Frame& f, size_t segment) {
     hold_[k].push_back(e_hold);
     local_.back().push_back(e_local);
     hold_.back().push_back(e_hold);
+    if (period_ns_ > 0 && 2 * (f.publish_ns - previous_.publish_ns) > 3 * period_ns_ &&
+        late_local_.size() < late_local_.capacity()) {
+      late_local_.push_back(e_local);
+      late_hold_.push_back(e_hold);
+    }
   } else if (have_) {
     ++gaps_;
   }
@@ -330,6 +337,8 @@ struct Inbox {
   LatencyTracker* latency = nullptr;
   RenderingError* errors = nullptr;
   const PalpationPath* path = nullptr;
+  std::vector<double>* model_age_ms = nullptr;
+  uint64_t deadline_misses = 0;  // the newest frame's Frame.deadlineMisses
 };
 
 class Sink final : public wire::FrameSink::Server {
@@ -347,13 +356,17 @@ class Sink final : public wire::FrameSink::Server {
     in.newest.target = vec3_of(f.getTarget());
     in.newest.render_force = vec3_of(f.getRenderForce());
     in.newest.render_model = local_model_of(f.getRenderModel());
+    in.newest.publish_ns = f.getPublishNs();
     in.tool = vec3_of(f.getIndenterPosition());
     in.contact = vec3_of(f.getToolContactForce());
     in.have = true;
+    in.deadline_misses = std::max(in.deadline_misses, f.getDeadlineMisses());
     if (in.t0 != 0) {
       ++in.frames;
       const double t = static_cast<double>(now - in.t0) * 1e-9;
       in.latency->on_frame(f.getCommandSeq(), t);
+      if (f.getHapticTick() >= 0 && in.model_age_ms->size() < in.model_age_ms->capacity())
+        in.model_age_ms->push_back(static_cast<double>(f.getModelAgeNs()) * 1e-6);
       in.errors->on_frame(in.newest, in.path->segment_at(t));
     }
     return kj::READY_NOW;
@@ -380,7 +393,9 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
     throw std::invalid_argument("haptic: the session must be real time (SessionInfo.rateHz > 0)");
   const Geometry geometry = geometry_of(info);
   const double max_force = info.getDevice().getMaxForce();
-  const int64_t command_period = static_cast<int64_t>(std::llround(1e9 / info.getRateHz()));
+  // Multirate: a command per render tick (the server renders each at once).
+  const double command_rate = info.getHapticRateHz() > 0 ? info.getHapticRateHz() : info.getRateHz();
+  const int64_t command_period = static_cast<int64_t>(std::llround(1e9 / command_rate));
   const int64_t servo_period = static_cast<int64_t>(std::llround(1e9 / config.servo_hz));
 
   auto inbox = std::make_shared<Inbox>();
@@ -397,10 +412,14 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   }
   PalpationPath path(geometry, inbox->tool, config.seconds, config.depth);
   LatencyTracker latency;
-  RenderingError errors(path.segments().size(), max_force);
-  const size_t ticks = static_cast<size_t>(config.seconds * info.getRateHz()) + 16;
+  RenderingError errors(path.segments().size(), max_force,
+                        static_cast<int64_t>(std::llround(1e9 / info.getRateHz())));
+  const size_t ticks = static_cast<size_t>(config.seconds * command_rate) + 16;
   latency.reserve(ticks);
   errors.reserve(ticks);
+  std::vector<double> model_age_ms;
+  model_age_ms.reserve(2 * ticks);
+  inbox->model_age_ms = &model_age_ms;
   Result result;
   result.segments = path.segments();
   const size_t servo_ticks = static_cast<size_t>(config.seconds * config.servo_hz) + 16;
@@ -509,6 +528,15 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   s.realtime_priority = stats.getRealtimePriority();
   for (auto sub_stats : stats.getSubscribers())
     if (sub_stats.getRateHz() == 0) s.frames_dropped += sub_stats.getDropped();
+  s.haptic_rate_hz = stats.getHapticRateHz();
+  s.haptic_ticks = stats.getHapticTicks();
+  s.haptic_misses = stats.getHapticMisses();
+  s.haptic_lateness_p99_us = stats.getHapticLatenessUs().getP99();
+  s.model_age_p50_us = stats.getModelAgeUs().getP50();
+  s.model_age_p99_us = stats.getModelAgeUs().getP99();
+  s.model_age_max_us = stats.getModelAgeUs().getMax();
+  result.model_age_ms = percentiles(std::move(model_age_ms));
+  result.misses_seen_in_frames = inbox->deadline_misses;
 
   std::vector<double> ms;
   ms.reserve(latency.latencies().size());
@@ -517,6 +545,7 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   result.frames = inbox->frames;
   result.servo_wake_p99_us = percentiles(std::move(wake_us)).p99;
   result.error = errors.overall();
+  result.error_late = errors.late();
   for (size_t k = 0; k < path.segments().size(); ++k) result.error_per_segment.push_back(errors.segment(k));
   result.peak_force = errors.peak_force();
   result.compared = errors.compared();
@@ -565,6 +594,15 @@ void print_report(std::FILE* out, const Result& r) {
                s.lateness_p50_us, s.lateness_p99_us, s.lateness_max_us,
                static_cast<unsigned long long>(s.deadline_misses), static_cast<long long>(s.ticks),
                static_cast<unsigned long long>(s.skipped_ticks), s.blow_ups, s.realtime_priority ? ", SCHED_FIFO" : "");
+  if (s.haptic_rate_hz > 0) {
+    std::fprintf(out, "multirate         render ticks at %.0f Hz: %lld, misses %llu, lateness p99 %.0f us; model age "
+                 "p50 %.2f ms, p99 %.2f ms, max %.2f ms (frames received: p50 %.2f ms, p99 %.2f ms)\n",
+                 s.haptic_rate_hz, static_cast<long long>(s.haptic_ticks),
+                 static_cast<unsigned long long>(s.haptic_misses), s.haptic_lateness_p99_us, 1e-3 * s.model_age_p50_us,
+                 1e-3 * s.model_age_p99_us, 1e-3 * s.model_age_max_us, r.model_age_ms.p50, r.model_age_ms.p99);
+  }
+  std::fprintf(out, "misses in frames  %llu reported by the stream as they happened (Frame.deadlineMisses)\n",
+               static_cast<unsigned long long>(r.misses_seen_in_frames));
   std::fprintf(out, "frames            %zu received, %llu dropped by the server, %zu compared, %zu gaps\n", r.frames,
                static_cast<unsigned long long>(s.frames_dropped), r.compared, r.gaps);
   std::fprintf(out, "servo loop        %zu ticks, %zu skipped, wake-up lateness p99 %.0f us%s\n", r.servo_ticks,
@@ -576,6 +614,7 @@ void print_report(std::FILE* out, const Result& r) {
   for (size_t k = 0; k < r.segments.size() && k < r.error_per_segment.size(); ++k)
     print_error_row(out, r.segments[k].label.c_str(), r.error_per_segment[k], r.peak_force);
   print_error_row(out, "all", r.error, r.peak_force);
+  print_error_row(out, "late ticks", r.error_late, r.peak_force);
   std::fflush(out);
 }
 
@@ -592,6 +631,12 @@ std::string json_fields(const Result& r) {
                   ", \"deadline_misses\": " + std::to_string(s.deadline_misses) + ", \"skipped_ticks\": " +
                   std::to_string(s.skipped_ticks) + ", \"blow_ups\": " + std::to_string(s.blow_ups) +
                   ", \"realtime_priority\": " + (s.realtime_priority ? "true" : "false") +
+                  ", \"haptic_rate_hz\": " + number(s.haptic_rate_hz) + ", \"haptic_ticks\": " +
+                  std::to_string(s.haptic_ticks) + ", \"haptic_misses\": " + std::to_string(s.haptic_misses) +
+                  ", \"haptic_lateness_p99_us\": " + number(s.haptic_lateness_p99_us) +
+                  ", \"model_age_p50_us\": " + number(s.model_age_p50_us) + ", \"model_age_p99_us\": " +
+                  number(s.model_age_p99_us) + ", \"model_age_max_us\": " + number(s.model_age_max_us) +
+                  ", \"misses_seen_in_frames\": " + std::to_string(r.misses_seen_in_frames) +
                   ", \"frames\": " + std::to_string(r.frames) + ", \"frames_dropped\": " +
                   std::to_string(s.frames_dropped) + ", \"frames_compared\": " + std::to_string(r.compared) +
                   ", \"frame_gaps\": " + std::to_string(r.gaps) + ", \"servo_ticks\": " +
@@ -599,7 +644,10 @@ std::string json_fields(const Result& r) {
                   ", \"servo_wake_p99_us\": " + number(r.servo_wake_p99_us) +
                   ", \"client_fifo\": " + (r.client_fifo ? "true" : "false") + ", \"peak_force_n\": " +
                   number(r.peak_force) + ", \"error\": {" + json_percentiles("local", r.error.local, r.peak_force) +
-                  ", " + json_percentiles("hold", r.error.hold, r.peak_force) + "}, \"segments\": [";
+                  ", " + json_percentiles("hold", r.error.hold, r.peak_force) + "}, \"error_late_ticks\": {" +
+                  "\"frames\": " + std::to_string(r.error_late.local.count) + ", " +
+                  json_percentiles("local", r.error_late.local, r.peak_force) + ", " +
+                  json_percentiles("hold", r.error_late.hold, r.peak_force) + "}, \"segments\": [";
   for (size_t k = 0; k < r.segments.size() && k < r.error_per_segment.size(); ++k) {
     const auto& e = r.error_per_segment[k];
     j += std::string(k ? ", " : "") + "{\"segment\": \"" + r.segments[k].label + "\", \"motion\": \"" +

@@ -146,14 +146,18 @@ class LatencyTracker {
 // right after frame j-1), its renderForce F_j, the full step's force at the target x_j,
 // against (a) the local model of frame j-1 at x_j, render(model_{j-1}, x_j, max_force),
 // and (b) the zero-order hold F_{j-1}. Per segment: the path's segment when frame j arrived.
+// Frames whose tick came late (published over 1.5 periods after the previous one: the
+// servo loop rendered the older model for longer) are also reported apart (late()).
 class RenderingError {
  public:
-  RenderingError(size_t segments, double max_force) : local_(segments + 1), hold_(segments + 1), max_force_(max_force) {}
+  RenderingError(size_t segments, double max_force, int64_t period_ns = 0)
+      : local_(segments + 1), hold_(segments + 1), max_force_(max_force), period_ns_(period_ns) {}
   struct Frame {
     int64_t tick;
     bool position_mode;
     V3 target, render_force;
     LocalModel render_model;
+    int64_t publish_ns = 0;  // Frame.publishNs
   };
   void on_frame(const Frame& f, size_t segment);
   void reserve(size_t frames);
@@ -163,13 +167,16 @@ class RenderingError {
   };
   Report overall() const;
   Report segment(size_t k) const;
+  Report late() const { return {percentiles(late_local_), percentiles(late_hold_)}; }
   double peak_force() const { return peak_; }  // the largest |renderForce| compared, N
   size_t compared() const { return local_.back().size(); }
   size_t gaps() const { return gaps_; }  // frames not compared: the previous tick was not received
 
  private:
   std::vector<std::vector<double>> local_, hold_;  // per segment; the last: all
+  std::vector<double> late_local_, late_hold_;     // frames after a late tick
   double max_force_;
+  int64_t period_ns_;
   bool have_ = false;
   Frame previous_{};
   double peak_ = 0;
@@ -206,6 +213,12 @@ struct ServerStats {
   uint64_t deadline_misses = 0, skipped_ticks = 0, frames_dropped = 0;
   uint32_t blow_ups = 0;
   bool realtime_priority = false;
+  // Multirate (OpenRequest.hapticRateHz): the server's render ticks.
+  double haptic_rate_hz = 0;  // 0: off
+  int64_t haptic_ticks = 0;
+  uint64_t haptic_misses = 0;
+  double haptic_lateness_p99_us = 0;
+  double model_age_p50_us = 0, model_age_p99_us = 0, model_age_max_us = 0;
 };
 
 struct Result {
@@ -216,9 +229,15 @@ struct Result {
   bool client_fifo = false;      // the loop ran with SCHED_FIFO
   std::vector<RenderingError::Report> error_per_segment;
   RenderingError::Report error;
+  RenderingError::Report error_late;  // the frames of late ticks (RenderingError::late())
   double peak_force = 0;
   size_t compared = 0, gaps = 0;
   ServerStats server;
+  // Frame.modelAgeNs of the frames received (multirate: how old the step a frame's force
+  // was rendered from was), ms; and the deadline misses the stream reported as they came
+  // (Frame.deadlineMisses: the newest frame's), against the stats' count at the end.
+  Percentiles model_age_ms;
+  uint64_t misses_seen_in_frames = 0;
   std::vector<ServoSample> servo;  // when Config::record_servo
 };
 
@@ -240,7 +259,8 @@ std::vector<std::string> with_free_guide(std::vector<std::string> overrides);
 
 // Runs the palpation path on a real-time session: subscribes to every tick (scalars
 // only), waits for the first frame (the path starts at the tool's position), then for
-// Config::seconds sends setPosition(path(t)) once per tick period (1 / info.rateHz),
+// Config::seconds sends setPosition(path(t)) once per tick period (1 / info.rateHz; with
+// multirate, 1 / info.hapticRateHz: the server renders a force per render tick),
 // pipelined, and runs a servo loop at Config::servo_hz that renders the newest frame's
 // renderModel at the device position (clock_nanosleep to the next deadline, then
 // ws.poll()). `live`, if given, gets a sample every Config::live_interval. Throws

@@ -235,6 +235,11 @@ struct OpenRequest {
   rateHz @5 :Float64;        # real-time loop rate; 0 = the server's --rate. (0, 10000]
   device @6 :DeviceLimits;   # the haptic device's limits; null = none (only the scene's force limit)
   coupling @7 :Coupling;     # initial virtual coupling for setPosition; null or 0 = the session's default
+  hapticRateHz @8 :Float64;  # multirate: the server renders the device's force at this rate from the newest
+                             # step's local model (renderModel at the newest setPosition), between the
+                             # steps of the full model at rateHz, and streams a frame per render
+                             # (docs/protocol.md, "Multirate"). 0 = off (a frame per step). Real-time
+                             # sessions only; [rateHz, 10000]
 }
 
 # What a haptic device can render, given at session open. The virtual coupling's
@@ -287,6 +292,7 @@ struct SessionInfo {
                                             # force-depth plot; empty when the server has none
   referenceIndentation @22 :List(Float64);  # m, the converged indentation at each of referenceForces
   referenceUncertainty @23 :List(Float64);  # m, its uncertainty
+  hapticRateHz @24 :Float64;   # OpenRequest.hapticRateHz in effect (0: off, a frame per step)
 }
 
 # ---------------------------------------------------------------------------
@@ -351,6 +357,14 @@ struct Frame {
                                              # surfaceOnly: per SessionInfo.surfaceVertices)
   vonMises @23 :List(Float32);      # Pa, von Mises equivalent of the particle's (node's) Cauchy stress
                                     # (core/stress.h; when FrameFields.vonMises; surfaceOnly as above)
+  hapticTick @24 :Int64 = -1;       # multirate: the server's render tick that made this frame (renderForce,
+                                    # target, forceSaturated and publishNs are its); -1 when multirate is off
+  modelAgeNs @25 :Int64;            # multirate: publishNs minus the publish time of the step the force was
+                                    # rendered from, ns (the rest of the frame is the newest step's, which
+                                    # may be one newer); 0 when multirate is off
+  deadlineMisses @26 :UInt64;       # the session's deadline misses so far (Stats.deadlineMisses), so that a
+                                    # client sees each miss in the stream as it happens
+  hapticMisses @27 :UInt64;         # multirate: the render ticks that ended after the next one's deadline
 }
 
 interface FrameSink {
@@ -410,7 +424,14 @@ struct Stats {
   missesLateStart @15 :UInt64;    # of deadlineMisses: the tick started over half a period late (the host
                                   # did not run the loop in time)
   missesLongStep @16 :UInt64;     # of deadlineMisses: the tick started in time and its work overran
-  pinned @17 :Bool;               # the loop runs on a core of its own (palpate-server pins unless --no-pin)
+  pinned @17 :Bool;               # the loop runs on a core of its own (palpate-server --pin)
+  watchdogYields @18 :UInt64;     # times the loop, behind its deadlines for longer than the watchdog allows,
+                                  # slept a period so that the server's other threads could run
+  hapticRateHz @19 :Float64;      # multirate render rate (0: off)
+  hapticTicks @20 :Int64;         # render ticks since the start
+  hapticMisses @21 :UInt64;       # render ticks that ended after the next one's deadline
+  hapticLatenessUs @22 :Percentiles;  # render tick start minus its deadline, us
+  modelAgeUs @23 :Percentiles;    # at each render tick, the age of the step it rendered from, us
 }
 
 enum RunState {

@@ -195,6 +195,15 @@ OpenPlan plan_session(wire::OpenRequest::Reader request, const ServerOptions& op
   if (!(rate == 0.0 || (rate > 0.0 && rate <= 10000.0)))
     fail("openSession: request.rateHz: must be in (0, 10000] (0 = the server's rate), got " + std::to_string(rate));
   plan.sim.rate_hz = rate == 0.0 ? options.rate_hz : rate;
+  const double haptic_rate = request.getHapticRateHz();
+  if (haptic_rate != 0.0) {
+    if (!std::isfinite(haptic_rate) || haptic_rate < plan.sim.rate_hz || haptic_rate > 10000.0)
+      fail("openSession: request.hapticRateHz: must be 0 (off) or in [the session's rate (" +
+           std::to_string(plan.sim.rate_hz) + " Hz), 10000], got " + std::to_string(haptic_rate));
+    if (plan.sim.headless)
+      fail("openSession: request.hapticRateHz: multirate rendering needs a real-time session (headless is true)");
+    plan.sim.haptic_rate_hz = haptic_rate;
+  }
 
   if (request.hasDevice()) {
     const auto d = request.getDevice();

@@ -72,25 +72,31 @@ void fill_particle_list(List list, const float* values, int components, const st
     for (int c = 0; c < components; ++c) list.set(k++, values[static_cast<size_t>(components) * i + c]);
 }
 
+// `render`: multirate, the render tick the frame is for (its force, target and time on
+// the step's body); null: the step's own frame.
 void fill_frame(wire::Frame::Builder f, const Snapshot& s, const FieldRequest& want, const DerivedFields* derived,
-                const std::vector<uint32_t>& surface_vertices) {
+                const std::vector<uint32_t>& surface_vertices, const HapticSample* render = nullptr) {
   f.setTick(s.tick);
   f.setSimTime(s.sim_time);
-  f.setPublishNs(s.publish_ns);
+  f.setPublishNs(render ? render->publish_ns : s.publish_ns);
+  f.setHapticTick(render ? render->haptic_tick : -1);
+  f.setModelAgeNs(render ? render->publish_ns - render->model_publish_ns : 0);
+  f.setDeadlineMisses(s.deadline_misses);
+  f.setHapticMisses(render ? render->haptic_misses : 0);
   set_vec3(f.initIndenterPosition(), s.tool_position);
   f.setIndenterVelocity(s.tool_velocity[2]);
   f.setIndenterContactForce(s.tool_contact_force[2]);
   f.setIndentation(s.indentation);
   f.setForceCommand(-s.force_command[2]);
-  f.setCommandSeq(s.command_seq);
+  f.setCommandSeq(render ? std::max(render->command_seq, s.command_seq) : s.command_seq);
   f.setRecoveries(s.recoveries);
   set_vec3(f.initToolVelocity(), s.tool_velocity);
   set_vec3(f.initToolContactForce(), s.tool_contact_force);
   set_vec3(f.initForceVector(), s.force_command);
   f.setMode(s.position_mode ? wire::ControlMode::POSITION : wire::ControlMode::FORCE);
-  set_vec3(f.initTarget(), s.target);
-  set_vec3(f.initRenderForce(), s.render_force);
-  f.setForceSaturated(s.force_saturated);
+  set_vec3(f.initTarget(), render ? render->target : s.target);
+  set_vec3(f.initRenderForce(), render ? render->render_force : s.render_force);
+  f.setForceSaturated(render ? render->force_saturated : s.force_saturated);
   fill_local_model(f.initContactModel(), s.contact_model);
   fill_local_model(f.initRenderModel(), s.render_model);
   const std::vector<uint32_t>* vertices = want.surface_only ? &surface_vertices : nullptr;
@@ -253,6 +259,7 @@ class SessionImpl final : public wire::Session::Server {
     info.setDt(s.integrator.dt);
     info.setRateHz(sim_->config().headless ? 0.0 : sim_->config().rate_hz);
     info.setHeadless(sim_->config().headless);
+    info.setHapticRateHz(sim_->haptic() ? sim_->haptic()->rate_hz() : 0.0);
     info.setForceLimit(force_limit_);
     auto rest = info.initRestPositions(3 * static_cast<unsigned>(m.particle_count));
     const double* x = m.rest_position.data();
@@ -409,6 +416,14 @@ class SessionImpl final : public wire::Session::Server {
     s.setMissesLateStart(c.misses_late_start);
     s.setMissesLongStep(c.misses_long_step);
     s.setPinned(c.pinned);
+    s.setWatchdogYields(c.watchdog_rests);
+    if (HapticRenderer* h = phase_ == Phase::ready ? sim_->haptic() : nullptr) {
+      s.setHapticRateHz(h->rate_hz());
+      s.setHapticTicks(c.haptic.ticks);
+      s.setHapticMisses(c.haptic.misses);
+      fill_percentiles(s.initHapticLatenessUs(), c.haptic.lateness_us);
+      fill_percentiles(s.initModelAgeUs(), c.haptic.model_age_us);
+    }
     auto subs = s.initSubscribers(static_cast<unsigned>(subscribers_.size()));
     unsigned k = 0;
     for (const auto& sub : subscribers_) {
@@ -537,20 +552,23 @@ class SessionImpl final : public wire::Session::Server {
       job_ = nullptr;
       job->fulfill();
     }
-    if (fresh) {
-      const Snapshot& frame = sim_->frames().front();
+    const Snapshot& frame = sim_->frames().front();
+    if (fresh && frame.recoveries > logged_blow_ups_) {
       // A blow-up is logged here, on the RPC thread: the simulation thread never logs.
-      if (frame.recoveries > logged_blow_ups_) {
-        logged_blow_ups_ = frame.recoveries;
-        const SimStatus status = sim_->status();
-        spdlog::warn("session {}: blow-up #{} at tick {}: {}", id_, frame.recoveries, status.last_blow_up_tick,
-                     status.last_blow_up);
-      }
+      logged_blow_ups_ = frame.recoveries;
+      const SimStatus status = sim_->status();
+      spdlog::warn("session {}: blow-up #{} at tick {}: {}", id_, frame.recoveries, status.last_blow_up_tick,
+                   status.last_blow_up);
+    }
+    if (HapticRenderer* haptic = sim_->haptic()) {
+      // Multirate: a frame per render tick (its force on the newest step), none per step.
+      if (haptic->samples().take()) stream(frame, &haptic->samples().front());
+    } else if (fresh) {
       stream(frame);
     }
   }
 
-  void stream(const Snapshot& frame) {
+  void stream(const Snapshot& frame, const HapticSample* render = nullptr) {
     const int64_t now = now_ns();
     bool removed = false;
     for (auto it = subscribers_.begin(); it != subscribers_.end();) {
@@ -570,7 +588,7 @@ class SessionImpl final : public wire::Session::Server {
         continue;
       }
       auto req = sub.sink.frameRequest(frame_size_hint(frame, sub.fields, surface_vertices_.size()));
-      fill_frame(req.initFrame(), frame, sub.fields, derived_for(frame, sub.fields), surface_vertices_);
+      fill_frame(req.initFrame(), frame, sub.fields, derived_for(frame, sub.fields), surface_vertices_, render);
       sub.in_flight = true;
       ++sub.sent;
       sub.next_due_ns += sub.interval_ns;

@@ -19,32 +19,15 @@
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/step.h"
+#include "server/deadlines.h"
 
 namespace palpate::server {
-
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
-}
 
 namespace {
 
 // The pressing force of the Hertz experiment's scalar fields (Frame.forceCommand,
 // Status.forceCommand): N, -z of the force command.
 double pressing_force(const State& state) { return -state.force_command[2]; }
-
-void sleep_until_ns(int64_t t) {
-  timespec ts{static_cast<time_t>(t / 1000000000), static_cast<long>(t % 1000000000)};
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
-}
-
-inline void cpu_relax() {
-#if defined(__x86_64__) || defined(__i386__)
-  __builtin_ia32_pause();
-#endif
-}
 
 // A finite state that is already running away: a particle or the indenter more
 // than 10 diagonals of the body's bounding box from its reference (such values would
@@ -118,6 +101,7 @@ void Simulation::cancel() {
 void Simulation::stop() {
   cancel();
   if (thread_.joinable()) thread_.join();
+  haptic_.reset();  // no wake-ups after stop()
 }
 
 uint64_t Simulation::enqueue(CommandType type, const Vec3& value) {
@@ -125,6 +109,7 @@ uint64_t Simulation::enqueue(CommandType type, const Vec3& value) {
   if (commands_.size() >= kMaxQueuedCommands) return 0;  // refused: nothing queued, no number used
   const uint64_t seq = next_seq_++;
   commands_.push_back({type, value, seq});
+  if (type == CommandType::set_position && haptic_) haptic_->offer_device(value, seq);  // rendered at once
   return seq;
 }
 
@@ -159,8 +144,10 @@ SimCounters Simulation::counters() const {
   c.misses_late_start = misses_late_start_.load(std::memory_order_relaxed);
   c.misses_long_step = misses_long_step_.load(std::memory_order_relaxed);
   c.stiffness_evaluations = stiffness_evaluations_.load(std::memory_order_relaxed);
+  c.watchdog_rests = watchdog_rests_.load(std::memory_order_relaxed);
   c.step_us = step_us_.summary();
   c.lateness_us = lateness_us_.summary();
+  if (phase() == Phase::ready && haptic_) c.haptic = haptic_->counters();
   return c;
 }
 
@@ -202,6 +189,9 @@ void Simulation::prepare_and_build() {
   state_ = std::make_unique<State>(make_state(*model_, options_));
   divergence_bound_ = divergence_bound(*model_);
   if (config_.contact_stiffness) stiffness_ = std::make_unique<StiffnessSource>(*model_, !config_.headless);
+  if (config_.haptic_rate_hz > 0.0 && !config_.headless)
+    haptic_ = std::make_unique<HapticRenderer>(config_.haptic_rate_hz, config_.device.max_force, config_.spin_margin_us,
+                                               config_.try_realtime, wake_fd_);
   rest_ = std::make_unique<Checkpoint>(*state_);
   checkpoint_ = std::make_unique<Checkpoint>(*state_);
   SnapshotBuffer frames([n = model_->particle_count](Snapshot& s) { s.reserve(n); });
@@ -286,33 +276,23 @@ void Simulation::run_realtime() {
     volatile char stack[256 * 1024];
     for (size_t k = 0; k < sizeof stack; k += 4096) stack[k] = 0;
   }
-  const int64_t period = static_cast<int64_t>(std::llround(1e9 / config_.rate_hz));
-  const int64_t margin = static_cast<int64_t>(config_.spin_margin_us * 1000.0);
-  const int64_t start = now_ns();
-  start_ns_.store(start, std::memory_order_relaxed);
-  int64_t deadline = start + period;
+  Deadlines deadlines(static_cast<int64_t>(std::llround(1e9 / config_.rate_hz)),
+                      static_cast<int64_t>(config_.spin_margin_us * 1000.0));
+  deadlines.start();
+  start_ns_.store(now_ns(), std::memory_order_relaxed);
   while (!stop_.load(std::memory_order_relaxed)) {
-    // Wait for the absolute deadline: sleep to a margin before it, then spin.
-    if (now_ns() < deadline - margin) sleep_until_ns(deadline - margin);
-    while (now_ns() < deadline) cpu_relax();
-    const int64_t tick_start = now_ns();
-    lateness_us_.add((tick_start - deadline) * 1e-3);
+    const int64_t tick_start = deadlines.wait();
+    lateness_us_.add((tick_start - deadlines.deadline()) * 1e-3);
 
     if (tick_once()) publish();
 
-    const int64_t end = now_ns();
-    last_tick_ns_.store(end, std::memory_order_relaxed);
-    deadline += period;
-    if (end > deadline) {
+    last_tick_ns_.store(now_ns(), std::memory_order_relaxed);
+    const Deadlines::Outcome o = deadlines.finish(tick_start);
+    if (o.watchdog_rest) watchdog_rests_.fetch_add(1, std::memory_order_relaxed);
+    if (o.missed) {
       deadline_misses_.fetch_add(1, std::memory_order_relaxed);
-      // Started over half a period late: the host's; else the step itself overran.
-      const bool late_start = tick_start - (deadline - period) > period / 2;
-      (late_start ? misses_late_start_ : misses_long_step_).fetch_add(1, std::memory_order_relaxed);
-      if (end > deadline + period) {  // over a full period behind: abandon deadlines, keep the phase grid
-        const int64_t behind = (end - deadline) / period;
-        deadline += behind * period;
-        skipped_ticks_.fetch_add(static_cast<uint64_t>(behind), std::memory_order_relaxed);
-      }
+      (o.late_start ? misses_late_start_ : misses_long_step_).fetch_add(1, std::memory_order_relaxed);
+      skipped_ticks_.fetch_add(static_cast<uint64_t>(o.skipped), std::memory_order_relaxed);
     }
   }
 }
@@ -492,6 +472,19 @@ void Simulation::publish() {
     }
   }
   s.publish_ns = now_ns();
+  s.deadline_misses = deadline_misses_.load(std::memory_order_relaxed);
+  if (haptic_) {
+    RenderInput in;
+    in.valid = true;
+    in.render_model = s.render_model;
+    in.render_force = s.render_force;
+    in.target = s.target;
+    in.position_mode = s.position_mode;
+    in.tick = s.tick;
+    in.publish_ns = s.publish_ns;
+    in.command_seq = s.command_seq;
+    haptic_->offer_model(in);
+  }
   status_tick_.store(state.tick, std::memory_order_relaxed);
   status_time_.store(state.time, std::memory_order_relaxed);
   frames_published_.fetch_add(1, std::memory_order_relaxed);

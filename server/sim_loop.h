@@ -29,13 +29,13 @@
 #include "core/options.h"
 #include "core/scene.h"
 #include "core/state.h"
+#include "server/deadlines.h"
+#include "server/haptic_loop.h"
 #include "server/histogram.h"
 #include "server/local_model.h"
 #include "server/snapshot.h"
 
 namespace palpate::server {
-
-int64_t now_ns();  // CLOCK_MONOTONIC
 
 // Unapplied commands a session holds; enqueue() refuses beyond.
 constexpr size_t kMaxQueuedCommands = 4096;
@@ -60,6 +60,9 @@ CouplingOptions default_coupling(const Model& model, const Options& opt, const D
 struct SimConfig {
   bool headless = false;
   double rate_hz = 1000.0;
+  // Multirate (server/haptic_loop.h): > 0 starts a HapticRenderer at this rate beside the
+  // loop (real time only); 0: none, a frame per step.
+  double haptic_rate_hz = 0.0;
   double spin_margin_us = 200.0;  // sleep until this long before the deadline, then spin
   bool try_realtime = true;       // ask for SCHED_FIFO (silently refused when not allowed)
   // The core the real-time loop pins itself to (-1: none). The server gives each real-time
@@ -105,7 +108,9 @@ struct SimCounters {
   bool realtime_priority = false;
   bool pinned = false;  // the loop runs on SimConfig::cpu only
   uint64_t stiffness_evaluations = 0;
+  uint64_t watchdog_rests = 0;  // the loop slept to let other threads run (server/deadlines.h)
   Histogram::Summary step_us, lateness_us;
+  HapticCounters haptic;  // multirate only
 };
 
 struct SimStatus {
@@ -173,6 +178,11 @@ class Simulation {
   SnapshotBuffer::Reader& frames() { return frames_reader_; }
   int64_t newest_tick() const { return status_tick_.load(std::memory_order_relaxed); }
 
+  // Multirate: the force renderer (null when SimConfig::haptic_rate_hz is 0 or headless);
+  // after phase() == ready. Its samples() and offer_device() are the RPC thread's
+  // (enqueue(set_position) offers the device position itself).
+  HapticRenderer* haptic() { return haptic_.get(); }
+
   SimCounters counters() const;  // any thread
   SimStatus status() const;      // any thread
 
@@ -225,6 +235,9 @@ class Simulation {
 
   // Created by the sim thread before phase ready, then RPC thread only.
   SnapshotBuffer::Reader frames_reader_;
+  // Created by the sim thread before phase ready; offer_model() sim thread, the rest as
+  // HapticRenderer says; stopped by stop().
+  std::unique_ptr<HapticRenderer> haptic_;
 
   // Any thread (atomic).
   std::atomic<Phase> phase_{Phase::starting};
@@ -248,7 +261,7 @@ class Simulation {
   std::atomic<int64_t> start_ns_{0}, last_tick_ns_{0};
   std::atomic<int64_t> stepping_ns_{0};
   std::atomic<uint64_t> deadline_misses_{0}, skipped_ticks_{0}, frames_published_{0}, frames_coalesced_{0};
-  std::atomic<uint64_t> misses_late_start_{0}, misses_long_step_{0};
+  std::atomic<uint64_t> misses_late_start_{0}, misses_long_step_{0}, watchdog_rests_{0};
   std::atomic<uint32_t> blow_ups_{0};
   std::atomic<bool> realtime_priority_{false}, pinned_{false};
   std::atomic<uint64_t> stiffness_evaluations_{0};  // copied from stiffness_ at each publish

@@ -40,6 +40,7 @@ struct Snapshot {
   double indentation = 0.0;            // m
   uint64_t command_seq = 0;
   uint32_t recoveries = 0;
+  uint64_t deadline_misses = 0;        // the session's so far
   bool has_positions = false;          // positions filled (someone wanted them)
   bool has_contacts = false;
   std::vector<float> positions;        // 3 n (capacity preallocated)

@@ -22,6 +22,7 @@
 #include <mutex>
 #include <random>
 #include <set>
+#include <algorithm>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -1271,6 +1272,94 @@ std::string client_frame(uint8_t opcode, const std::string& payload, size_t leng
 
 // The loop runs where the server put it (unpinned: the default), and every deadline miss
 // is counted under one cause: a late start or a long step.
+// Multirate (OpenRequest.hapticRateHz): the model steps at 100 Hz, the server renders at
+// 500 Hz. The stream carries a frame per render tick (several per step), each with its
+// render tick and the age of the step it was rendered from; a device position sent between
+// steps is in the next render's target and commandSeq before any step applies it.
+TEST(ServerE2E, MultirateFramesComeAtTheRenderRateFromTheNewestStep) {
+  struct Seen {
+    int64_t tick, haptic_tick, model_age_ns;
+    uint64_t seq;
+    double target_z;
+  };
+  struct Sink final : public palpate::wire::FrameSink::Server {
+    explicit Sink(std::vector<Seen>& s) : seen(s) {}
+    kj::Promise<void> frame(FrameContext context) override {
+      auto f = context.getParams().getFrame();
+      seen.push_back({f.getTick(), f.getHapticTick(), f.getModelAgeNs(), f.getCommandSeq(), f.getTarget().getZ()});
+      return kj::READY_NOW;
+    }
+    kj::Promise<void> done(DoneContext) override { return kj::READY_NOW; }
+    std::vector<Seen>& seen;
+  };
+  Client c;
+  auto open = [&](double rate, double haptic_rate, bool headless) {
+    auto req = c.server.openSessionRequest();
+    auto r = req.initRequest();
+    r.getScene().setName("hertz_cube");
+    auto o = r.initOverrides(2);
+    o.set(0, "body.distribution.per_edge=8");
+    o.set(1, "indenter.guide=free");
+    r.setHeadless(headless);
+    r.setRateHz(rate);
+    r.setHapticRateHz(haptic_rate);
+    return req;
+  };
+  // Refused: below the model's rate, above 10 kHz, headless, not a number.
+  EXPECT_NE(c.error_of(open(100, 50, false)).find("request.hapticRateHz"), std::string::npos);
+  EXPECT_NE(c.error_of(open(100, 20000, false)).find("request.hapticRateHz"), std::string::npos);
+  EXPECT_NE(c.error_of(open(100, 500, true)).find("headless"), std::string::npos);
+  EXPECT_NE(c.error_of(open(100, std::nan(""), false)).find("request.hapticRateHz"), std::string::npos);
+
+  auto opened = open(100, 500, false).send().wait(c.ws());
+  auto session = opened.getSession();
+  EXPECT_EQ(opened.getInfo().getHapticRateHz(), 500.0);
+  const double touch = opened.getInfo().getTouchHeight();
+  std::vector<Seen> seen;
+  seen.reserve(100000);
+  auto sub = session.subscribeRequest();
+  sub.setSink(kj::heap<Sink>(seen));
+  sub.getOptions().setRateHz(0);
+  auto handle = sub.send().wait(c.ws()).getSubscription();
+  c.pump(1000);
+  auto to = session.setPositionRequest();
+  to.initPosition().setX(0.0);
+  to.getPosition().setY(0.0);
+  to.getPosition().setZ(touch + 0.05);
+  const uint64_t seq = to.send().wait(c.ws()).getSeq();
+  c.pump(500);
+  auto stats_response = session.statsRequest().send().wait(c.ws());
+  auto stats = stats_response.getStats();
+  EXPECT_EQ(stats.getHapticRateHz(), 500.0);
+  EXPECT_GT(stats.getHapticTicks(), 0);
+  EXPECT_EQ(stats.getTargetRateHz(), 100.0);
+  handle = nullptr;
+  c.pump(50);
+
+  ASSERT_GT(seen.size(), 10u);
+  std::set<int64_t> steps, renders;
+  bool ordered = true;
+  for (size_t k = 0; k < seen.size(); ++k) {
+    EXPECT_GE(seen[k].haptic_tick, 0);
+    EXPECT_GE(seen[k].model_age_ns, 0);
+    steps.insert(seen[k].tick);
+    renders.insert(seen[k].haptic_tick);
+    if (k > 0) ordered = ordered && seen[k].haptic_tick > seen[k - 1].haptic_tick;
+  }
+  EXPECT_TRUE(ordered);
+  EXPECT_GE(renders.size(), 2 * steps.size()) << "several renders per step (" << renders.size() << " renders of "
+                                               << steps.size() << " steps)";
+  // The first frame that includes the setPosition renders at its target.
+  const auto first = std::find_if(seen.begin(), seen.end(), [&](const Seen& s) { return s.seq >= seq; });
+  ASSERT_NE(first, seen.end());
+  EXPECT_EQ(first->target_z, touch + 0.05);
+  std::printf("multirate: %zu frames of %zu render ticks over %zu steps; stats: %lld render ticks, %llu misses, "
+              "model age p50 %.0f us p99 %.0f us\n",
+              seen.size(), renders.size(), steps.size(), static_cast<long long>(stats.getHapticTicks()),
+              static_cast<unsigned long long>(stats.getHapticMisses()), stats.getModelAgeUs().getP50(),
+              stats.getModelAgeUs().getP99());
+}
+
 TEST(ServerE2E, EveryMissHasACauseAndPinningIsReported) {
   {
     Client c;

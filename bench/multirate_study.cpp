@@ -1,0 +1,138 @@
+#include "bench/multirate_study.h"
+
+#include <poll.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "server/haptic_loop.h"
+#include "server/sim_loop.h"
+
+namespace palpate::bench {
+
+namespace {
+
+using server::Simulation;
+using server::Snapshot;
+
+// A headless session of the server's session thread, stepped one tick at a time.
+class Headless {
+ public:
+  Headless(Scene scene, bool contact_stiffness) : sim_(config(contact_stiffness), std::move(scene)) {
+    while (sim_.phase() == server::Phase::starting) wait();
+    if (sim_.phase() == server::Phase::failed) throw std::runtime_error(sim_.status().error);
+  }
+  // One tick with the device at x; the frame it published.
+  const Snapshot& step(const Vec3& x) {
+    sim_.enqueue(server::CommandType::set_position, x);
+    const auto t0 = std::chrono::steady_clock::now();
+    sim_.request_steps(1);
+    while (!sim_.take_job_done()) wait();
+    seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    sim_.frames().take();
+    const Snapshot& s = sim_.frames().front();
+    if (sim_.status().blow_ups > 0)
+      throw std::runtime_error("the run at dt " + std::to_string(sim_.scene().integrator.dt) +
+                               " s blew up: " + sim_.status().last_blow_up);
+    return s;
+  }
+  const Model& model() const { return sim_.model(); }
+  double seconds() const { return seconds_; }
+
+ private:
+  static server::SimConfig config(bool contact_stiffness) {
+    server::SimConfig c;
+    c.headless = true;
+    c.try_realtime = false;
+    c.contact_stiffness = contact_stiffness;
+    return c;
+  }
+  void wait() {
+    pollfd p{sim_.wake_fd(), POLLIN, 0};
+    if (poll(&p, 1, 60000) != 1) throw std::runtime_error("a headless session did not answer within 60 s");
+    uint64_t value = 0;
+    [[maybe_unused]] const ssize_t r = read(sim_.wake_fd(), &value, sizeof value);
+  }
+  Simulation sim_;
+  double seconds_ = 0;
+};
+
+Vec3 vec(const haptic::V3& v) { return {v[0], v[1], v[2]}; }
+haptic::V3 v3(const Vec3& v) { return {v[0], v[1], v[2]}; }
+
+}  // namespace
+
+MultirateResult run_multirate_study(const MultirateConfig& config) {
+  SceneOverrides overrides = config.overrides;
+  if (std::none_of(overrides.begin(), overrides.end(), [](const auto& o) { return o.first == "indenter.guide"; }))
+    overrides.emplace_back("indenter.guide", "free");
+  const double h = 1.0 / config.haptic_rate_hz;
+  Scene fine_scene = load_scene(config.scene_file, overrides);
+  Scene coarse_scene = fine_scene;
+  const double model_dt = config.model_dt > 0 ? config.model_dt : fine_scene.integrator.dt;
+  const long ratio = std::lround(model_dt / h);
+  if (ratio < 1 || std::abs(ratio * h - model_dt) > 1e-9 * model_dt)
+    throw std::invalid_argument("the model's step (" + std::to_string(model_dt) +
+                                " s) must be a whole number of haptic periods (" + std::to_string(h) + " s)");
+  fine_scene.integrator.dt = h;
+  coarse_scene.integrator.dt = model_dt;
+
+  Headless truth(std::move(fine_scene), false);  // the truth needs no local model
+  Headless coarse(std::move(coarse_scene), true);
+  const Model& m = truth.model();
+
+  haptic::Geometry g;
+  const Vec3 lo = m.rest_position.rowwise().minCoeff(), hi = m.rest_position.rowwise().maxCoeff();
+  g.box_min = v3(lo);
+  g.box_max = v3(hi);
+  g.touch_height = m.touch_height;
+  g.radius = m.indenter_radius;
+  g.workspace_min = v3(m.tool_workspace_min);
+  g.workspace_max = v3(m.tool_workspace_max);
+  const haptic::PalpationPath path(g, v3(m.indenter_start), config.seconds, config.depth);
+
+  MultirateResult r;
+  r.segments = path.segments();
+  r.particles = m.particle_count;
+  r.model_dt = model_dt;
+  r.haptic_dt = h;
+  const long ticks = std::lround(config.seconds / h);
+  r.samples.reserve(static_cast<size_t>(ticks));
+
+  server::RenderInput newest;  // the newest coarse step the renderer may use
+  server::RenderInput pending;  // the coarse step in progress (usable from its end time)
+  double pending_time = 0;      // its state's time
+  for (long k = 0; k < ticks; ++k) {
+    const double t = k * h;
+    const Vec3 x = vec(path.position(t));
+    if (k % ratio == 0) {  // a coarse step starts: the device position now
+      const Snapshot& s = coarse.step(x);
+      pending.valid = true;
+      pending.render_model = s.render_model;
+      pending.render_force = s.render_force;
+      pending.target = s.target;
+      pending.position_mode = s.position_mode;
+      pending.tick = s.tick;
+      pending.command_seq = s.command_seq;
+      pending_time = s.sim_time;
+    }
+    const Snapshot& f = truth.step(x);  // state at t + h, the device at x
+    const double now = t + h;
+    if (pending.valid && pending_time <= now + 1e-12) newest = pending;
+    if (!newest.valid) continue;  // nothing to render from yet (the first coarse period)
+    server::DeviceInput device{x, newest.command_seq + 1};  // newer than the step's
+    const server::HapticSample rendered = server::render_sample(newest, device, 0.0);
+    MultirateSample sample{t, path.segment_at(t), f.render_force, rendered.render_force, newest.render_force,
+                           now - newest.tick * model_dt};
+    r.peak = std::max(r.peak, f.render_force.norm());
+    r.samples.push_back(sample);
+  }
+  r.truth_seconds = truth.seconds();
+  r.coarse_seconds = coarse.seconds();
+  return r;
+}
+
+}  // namespace palpate::bench
