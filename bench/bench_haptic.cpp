@@ -51,6 +51,11 @@ median: tail figures swing on a shared machine.
                        the force at this rate from the newest step's local model while
                        the model steps at --rate; the client sends a setPosition per
                        render tick. 0 = off (default)
+  --replay-truth       with --server-haptic-rate: after each run, replay the served
+                       forces' device positions into a headless session of the same
+                       scene stepped at the render rate (integrator.dt = 1 / rate) and
+                       print |served - truth| per segment (the real-time multirate force
+                       against the scene stepped every render tick)
   --depth M            device depth below first touch, m, > 0 (default R/5)
   --device-stiffness K the device's largest stiffness, N/m, >= 0 (default 0: none)
   --device-damping B   the device's largest damping, N s/m, >= 0 (default 0: none)
@@ -75,6 +80,7 @@ struct Args {
   std::string scene = default_scene();
   double rate = 1000.0;
   double server_haptic_rate = 0.0;
+  bool replay_truth = false;
   std::vector<std::string> overrides;
   palpate::haptic::DeviceFlags haptic{4000.0};
   std::string connect;
@@ -98,6 +104,8 @@ Args parse_args(int argc, char** argv) {
       a.server_haptic_rate = args.number();
       if (!(a.server_haptic_rate >= 0 && a.server_haptic_rate <= 10000))
         throw std::invalid_argument("--server-haptic-rate: must be in [0, 10000] Hz");
+    } else if (flag == "--replay-truth") {
+      a.replay_truth = true;
     } else if (flag == "--set") {
       const std::string assignment = args.value();
       palpate::cli::scene_override(assignment);
@@ -157,6 +165,30 @@ int main(int argc, char** argv) {
       auto session = opened.getSession();
       runs.push_back(palpate::haptic::run_palpation(session, info, ws, config));
       session.closeRequest().send().wait(ws);
+      if (a.replay_truth && a.server_haptic_rate > 0) {
+        auto truth_open = server.openSessionRequest();
+        auto truth_req = truth_open.initRequest();
+        std::vector<std::string> truth_overrides = a.overrides;
+        truth_overrides.push_back("integrator.dt=" + std::to_string(1.0 / a.server_haptic_rate));
+        auto to = truth_req.initOverrides(static_cast<unsigned>(truth_overrides.size()));
+        for (unsigned k = 0; k < truth_overrides.size(); ++k) to.set(k, truth_overrides[k]);
+        truth_req.setHeadless(true);
+        palpate::haptic::set_device(truth_req, a.haptic.device_stiffness, a.haptic.device_damping,
+                                    a.haptic.device_force);
+        auto truth_session = truth_open.send().wait(ws).getSession();
+        const auto replay = palpate::haptic::replay_truth(truth_session, ws, runs.back());
+        truth_session.closeRequest().send().wait(ws);
+        const auto& r = runs.back();
+        auto pct = [&](double x) { return replay.peak > 0 ? 100.0 * x / replay.peak : 0.0; };
+        std::printf("== replay: the served forces against the scene stepped at %.0f Hz (%zu steps, peak %.4g N)\n",
+                    a.server_haptic_rate, replay.steps, replay.peak);
+        for (size_t k = 0; k < r.segments.size() && k < replay.segment.size(); ++k)
+          std::printf("  %-12s %6zu   |served - truth| p50 %.3g  p99 %.3g (%.2f %%)  max %.3g N\n",
+                      r.segments[k].label.c_str(), replay.segment[k].count, replay.segment[k].p50,
+                      replay.segment[k].p99, pct(replay.segment[k].p99), replay.segment[k].max);
+        std::printf("  %-12s %6zu   |served - truth| p50 %.3g  p99 %.3g (%.2f %%)  max %.3g N\n", "all",
+                    replay.all.count, replay.all.p50, replay.all.p99, pct(replay.all.p99), replay.all.max);
+      }
       if (!a.json) {
         std::printf("== run %d of %d: scene %s (%u particles), %.0f s, servo %.0f Hz, coupling %.0f N/m %.1f N s/m\n",
                     run + 1, a.repeat, scene_name.c_str(), particles, a.seconds, a.haptic.haptic_rate, coupling_k,
