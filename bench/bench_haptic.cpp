@@ -13,7 +13,9 @@
 
 #include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "bench/multirate_study.h"
 #include "clients/haptic.h"
+#include "core/scene.h"
 #include "protocol/palpate.capnp.h"
 
 namespace {
@@ -52,10 +54,10 @@ median: tail figures swing on a shared machine.
                        the model steps at --rate; the client sends a setPosition per
                        render tick. 0 = off (default)
   --replay-truth       with --server-haptic-rate: after each run, replay the served
-                       forces' device positions into a headless session of the same
-                       scene stepped at the render rate (integrator.dt = 1 / rate) and
-                       print |served - truth| per segment (the real-time multirate force
-                       against the scene stepped every render tick)
+                       forces' device positions, render tick by render tick, into the
+                       same scene stepped at the render rate (integrator.dt = 1 / rate,
+                       in process, headless) and print |served - truth| per segment:
+                       the real-time multirate force against full steps every tick
   --depth M            device depth below first touch, m, > 0 (default R/5)
   --device-stiffness K the device's largest stiffness, N/m, >= 0 (default 0: none)
   --device-damping B   the device's largest damping, N s/m, >= 0 (default 0: none)
@@ -117,10 +119,57 @@ Args parse_args(int argc, char** argv) {
     return true;
   });
   a.overrides = palpate::haptic::with_free_guide(a.overrides);
+  if (a.replay_truth && (a.server_haptic_rate <= 0 || !a.connect.empty()))
+    palpate::cli::usage_error("palpate-bench-haptic", "--replay-truth: needs --server-haptic-rate and the scene "
+                              "file (not --connect)", kUsage);
   return a;
 }
 
 double median(std::vector<double> v) { return palpate::haptic::percentile(v, 0.5); }
+
+// --replay-truth: the served forces against the scene stepped at the render rate, in
+// process (a headless session of the server's session thread without the local models,
+// whose contact stiffness would cost a fine cloud about a quarter second a step). One
+// step per render tick from the first served to the last, the device at the served
+// target (held through ticks whose frame did not arrive); each served force against the
+// truth's renderForce after the step with its target.
+void print_replay(const Args& a, const palpate::haptic::Result& run) {
+  using palpate::haptic::V3;
+  if (run.served.empty()) return;
+  palpate::SceneOverrides overrides;
+  for (const std::string& o : a.overrides) overrides.push_back(palpate::cli::scene_override(o));
+  overrides.emplace_back("integrator.dt", std::to_string(1.0 / a.server_haptic_rate));
+  palpate::bench::HeadlessSession truth(palpate::load_scene(a.scene, overrides), false);
+  std::vector<std::vector<double>> per_segment(run.segments.size());
+  std::vector<double> all;
+  double peak = 0;
+  size_t next = 0, steps = 0;
+  V3 device = run.served.front().target;
+  for (int64_t tick = run.served.front().haptic_tick; tick <= run.served.back().haptic_tick; ++tick) {
+    while (next < run.served.size() && run.served[next].haptic_tick < tick) ++next;
+    const bool served = next < run.served.size() && run.served[next].haptic_tick == tick;
+    if (served) device = run.served[next].target;
+    const palpate::Vec3 f = truth.step({device[0], device[1], device[2]}).render_force;
+    ++steps;
+    peak = std::max(peak, f.norm());
+    if (!served) continue;
+    const V3& g = run.served[next].render_force;
+    const double e = (palpate::Vec3(g[0], g[1], g[2]) - f).norm();
+    all.push_back(e);
+    size_t k = 0;
+    while (k + 1 < run.segments.size() && run.served[next].t >= run.segments[k + 1].t0) ++k;
+    per_segment[k].push_back(e);
+  }
+  auto row = [&](const char* name, std::vector<double> v) {
+    const auto p = palpate::haptic::percentiles(std::move(v));
+    std::printf("  %-12s %6zu   p50 %.3g  p99 %.3g (%.2f %% of peak)  max %.3g N\n", name, p.count, p.p50, p.p99,
+                peak > 0 ? 100.0 * p.p99 / peak : 0.0, p.max);
+  };
+  std::printf("== replay: |served - truth|, the truth stepped at %.0f Hz in process (%zu steps, peak %.4g N, %.1f s)\n",
+              a.server_haptic_rate, steps, peak, truth.seconds());
+  for (size_t k = 0; k < run.segments.size(); ++k) row(run.segments[k].label.c_str(), per_segment[k]);
+  row("all", all);
+}
 
 }  // namespace
 
@@ -165,30 +214,7 @@ int main(int argc, char** argv) {
       auto session = opened.getSession();
       runs.push_back(palpate::haptic::run_palpation(session, info, ws, config));
       session.closeRequest().send().wait(ws);
-      if (a.replay_truth && a.server_haptic_rate > 0) {
-        auto truth_open = server.openSessionRequest();
-        auto truth_req = truth_open.initRequest();
-        std::vector<std::string> truth_overrides = a.overrides;
-        truth_overrides.push_back("integrator.dt=" + std::to_string(1.0 / a.server_haptic_rate));
-        auto to = truth_req.initOverrides(static_cast<unsigned>(truth_overrides.size()));
-        for (unsigned k = 0; k < truth_overrides.size(); ++k) to.set(k, truth_overrides[k]);
-        truth_req.setHeadless(true);
-        palpate::haptic::set_device(truth_req, a.haptic.device_stiffness, a.haptic.device_damping,
-                                    a.haptic.device_force);
-        auto truth_session = truth_open.send().wait(ws).getSession();
-        const auto replay = palpate::haptic::replay_truth(truth_session, ws, runs.back());
-        truth_session.closeRequest().send().wait(ws);
-        const auto& r = runs.back();
-        auto pct = [&](double x) { return replay.peak > 0 ? 100.0 * x / replay.peak : 0.0; };
-        std::printf("== replay: the served forces against the scene stepped at %.0f Hz (%zu steps, peak %.4g N)\n",
-                    a.server_haptic_rate, replay.steps, replay.peak);
-        for (size_t k = 0; k < r.segments.size() && k < replay.segment.size(); ++k)
-          std::printf("  %-12s %6zu   |served - truth| p50 %.3g  p99 %.3g (%.2f %%)  max %.3g N\n",
-                      r.segments[k].label.c_str(), replay.segment[k].count, replay.segment[k].p50,
-                      replay.segment[k].p99, pct(replay.segment[k].p99), replay.segment[k].max);
-        std::printf("  %-12s %6zu   |served - truth| p50 %.3g  p99 %.3g (%.2f %%)  max %.3g N\n", "all",
-                    replay.all.count, replay.all.p50, replay.all.p99, pct(replay.all.p99), replay.all.max);
-      }
+      if (a.replay_truth) print_replay(a, runs.back());
       if (!a.json) {
         std::printf("== run %d of %d: scene %s (%u particles), %.0f s, servo %.0f Hz, coupling %.0f N/m %.1f N s/m\n",
                     run + 1, a.repeat, scene_name.c_str(), particles, a.seconds, a.haptic.haptic_rate, coupling_k,

@@ -13,52 +13,43 @@
 
 namespace palpate::bench {
 
-namespace {
-
-using server::Simulation;
 using server::Snapshot;
 
-// A headless session of the server's session thread, stepped one tick at a time.
-class Headless {
- public:
-  Headless(Scene scene, bool contact_stiffness) : sim_(config(contact_stiffness), std::move(scene)) {
-    while (sim_.phase() == server::Phase::starting) wait();
-    if (sim_.phase() == server::Phase::failed) throw std::runtime_error(sim_.status().error);
-  }
-  // One tick with the device at x; the frame it published.
-  const Snapshot& step(const Vec3& x) {
-    sim_.enqueue(server::CommandType::set_position, x);
-    const auto t0 = std::chrono::steady_clock::now();
-    sim_.request_steps(1);
-    while (!sim_.take_job_done()) wait();
-    seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    sim_.frames().take();
-    const Snapshot& s = sim_.frames().front();
-    if (sim_.status().blow_ups > 0)
-      throw std::runtime_error("the run at dt " + std::to_string(sim_.scene().integrator.dt) +
-                               " s blew up: " + sim_.status().last_blow_up);
-    return s;
-  }
-  const Model& model() const { return sim_.model(); }
-  double seconds() const { return seconds_; }
+HeadlessSession::HeadlessSession(Scene scene, bool contact_stiffness) : sim_(config(contact_stiffness), std::move(scene)) {
+  while (sim_.phase() == server::Phase::starting) wait();
+  if (sim_.phase() == server::Phase::failed) throw std::runtime_error(sim_.status().error);
+}
 
- private:
-  static server::SimConfig config(bool contact_stiffness) {
-    server::SimConfig c;
-    c.headless = true;
-    c.try_realtime = false;
-    c.contact_stiffness = contact_stiffness;
-    return c;
-  }
-  void wait() {
-    pollfd p{sim_.wake_fd(), POLLIN, 0};
-    if (poll(&p, 1, 60000) != 1) throw std::runtime_error("a headless session did not answer within 60 s");
-    uint64_t value = 0;
-    [[maybe_unused]] const ssize_t r = read(sim_.wake_fd(), &value, sizeof value);
-  }
-  Simulation sim_;
-  double seconds_ = 0;
-};
+const Snapshot& HeadlessSession::step(const Vec3& x) {
+  sim_.enqueue(server::CommandType::set_position, x);
+  const auto t0 = std::chrono::steady_clock::now();
+  sim_.request_steps(1);
+  while (!sim_.take_job_done()) wait();
+  seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  sim_.frames().take();
+  const Snapshot& s = sim_.frames().front();
+  if (sim_.status().blow_ups > 0)
+    throw std::runtime_error("the run at dt " + std::to_string(sim_.scene().integrator.dt) +
+                             " s blew up: " + sim_.status().last_blow_up);
+  return s;
+}
+
+server::SimConfig HeadlessSession::config(bool contact_stiffness) {
+  server::SimConfig c;
+  c.headless = true;
+  c.try_realtime = false;
+  c.contact_stiffness = contact_stiffness;
+  return c;
+}
+
+void HeadlessSession::wait() {
+  pollfd p{sim_.wake_fd(), POLLIN, 0};
+  if (poll(&p, 1, 60000) != 1) throw std::runtime_error("a headless session did not answer within 60 s");
+  uint64_t value = 0;
+  [[maybe_unused]] const ssize_t r = read(sim_.wake_fd(), &value, sizeof value);
+}
+
+namespace {
 
 Vec3 vec(const haptic::V3& v) { return {v[0], v[1], v[2]}; }
 haptic::V3 v3(const Vec3& v) { return {v[0], v[1], v[2]}; }
@@ -80,8 +71,8 @@ MultirateResult run_multirate_study(const MultirateConfig& config) {
   fine_scene.integrator.dt = h;
   coarse_scene.integrator.dt = model_dt;
 
-  Headless truth(std::move(fine_scene), false);  // the truth needs no local model
-  Headless coarse(std::move(coarse_scene), true);
+  HeadlessSession truth(std::move(fine_scene), false);  // the truth needs no local model
+  HeadlessSession coarse(std::move(coarse_scene), true);
   const Model& m = truth.model();
 
   haptic::Geometry g;
@@ -110,13 +101,7 @@ MultirateResult run_multirate_study(const MultirateConfig& config) {
     const Vec3 x = vec(path.position(t));
     if (k % ratio == 0) {  // a coarse step starts: the device position now
       const Snapshot& s = coarse.step(x);
-      pending.valid = true;
-      pending.render_model = s.render_model;
-      pending.render_force = s.render_force;
-      pending.target = s.target;
-      pending.position_mode = s.position_mode;
-      pending.tick = s.tick;
-      pending.command_seq = s.command_seq;
+      pending = server::render_input_of(s);
       pending_time = s.sim_time;
     }
     const Snapshot& f = truth.step(x);  // state at t + h, the device at x

@@ -19,8 +19,28 @@
 #include "clients/haptic.h"
 #include "core/scene.h"
 #include "core/types.h"
+#include "server/sim_loop.h"
 
 namespace palpate::bench {
+
+// A headless session of the server's session thread, in process, stepped one tick at a
+// time with the device at a position (position mode). Throws std::runtime_error with the
+// session's message when it fails to start or blows up.
+class HeadlessSession {
+ public:
+  // contact_stiffness: compute the frames' local models (at every step: costly on fine clouds).
+  HeadlessSession(Scene scene, bool contact_stiffness);
+  // One tick with the device at x; the frame it published.
+  const server::Snapshot& step(const Vec3& x);
+  const Model& model() const { return sim_.model(); }
+  double seconds() const { return seconds_; }  // wall time spent stepping
+
+ private:
+  static server::SimConfig config(bool contact_stiffness);
+  void wait();
+  server::Simulation sim_;
+  double seconds_ = 0;
+};
 
 struct MultirateConfig {
   std::string scene_file;

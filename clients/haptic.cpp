@@ -558,47 +558,6 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   return result;
 }
 
-ReplayError replay_truth(wire::Session::Client truth, kj::WaitScope& ws, const Result& run) {
-  ReplayError r;
-  if (run.served.empty()) return r;
-  std::vector<std::vector<double>> per_segment(run.segments.size());
-  std::vector<double> all;
-  all.reserve(run.served.size());
-  const int64_t first = run.served.front().haptic_tick, last = run.served.back().haptic_tick;
-  size_t next = 0;
-  V3 device = run.served.front().target;
-  auto set_position = [&](const V3& x) {
-    auto req = truth.setPositionRequest();
-    auto p = req.initPosition();
-    p.setX(x[0]);
-    p.setY(x[1]);
-    p.setZ(x[2]);
-    req.send().wait(ws);
-  };
-  for (int64_t tick = first; tick <= last; ++tick) {
-    while (next < run.served.size() && run.served[next].haptic_tick < tick) ++next;
-    const bool served = next < run.served.size() && run.served[next].haptic_tick == tick;
-    if (served) device = run.served[next].target;
-    set_position(device);
-    auto step = truth.stepRequest();
-    step.setN(1);
-    auto response = step.send().wait(ws);
-    const V3 f = vec3_of(response.getFrame().getRenderForce());
-    ++r.steps;
-    r.peak = std::max(r.peak, norm(f));
-    if (!served) continue;
-    const double e = norm(sub(run.served[next].render_force, f));
-    all.push_back(e);
-    const double t = run.served[next].t;
-    size_t k = 0;
-    while (k + 1 < run.segments.size() && t >= run.segments[k + 1].t0) ++k;
-    per_segment[k].push_back(e);
-  }
-  r.all = percentiles(std::move(all));
-  for (auto& v : per_segment) r.segment.push_back(percentiles(std::move(v)));
-  return r;
-}
-
 }  // namespace palpate::haptic
 
 namespace palpate::haptic {

@@ -239,7 +239,8 @@ struct Result {
   Percentiles model_age_ms;
   uint64_t misses_seen_in_frames = 0;
   // Multirate: every frame received, by render tick (the force the server rendered and
-  // where), for a replay against the scene stepped at the render rate (replay_truth).
+  // where), for a replay against the scene stepped at the render rate
+  // (palpate-bench-haptic --replay-truth).
   struct Served {
     int64_t haptic_tick;
     V3 target, render_force;
@@ -276,20 +277,6 @@ std::vector<std::string> with_free_guide(std::vector<std::string> overrides);
 // configuration.
 Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader info, kj::WaitScope& ws,
                      const Config& config, const std::function<void(const ServoSample&, const char*)>& live = {});
-
-// The served forces of a multirate run against the truth: `truth` is a headless session
-// of the same scene stepped at the render rate (integrator.dt = 1 / hapticRateHz); it is
-// stepped once per render tick from the first served to the last, the device at the
-// served target (held through ticks whose frame did not arrive), and each served force
-// is compared with the truth's renderForce after the step with that target. Fills the
-// error per motion segment (local: served - truth; hold: none, zeros) and overall.
-struct ReplayError {
-  Percentiles all;                   // |served - truth|, N
-  std::vector<Percentiles> segment;  // per path segment
-  double peak = 0;                   // the largest |truth|, N
-  size_t steps = 0;
-};
-ReplayError replay_truth(wire::Session::Client truth, kj::WaitScope& ws, const Result& run);
 
 // The summary of a run as text: command-to-force latency, the server's tick lateness and
 // misses, the servo loop, and the rendering error (local model against the zero-order

@@ -30,6 +30,19 @@ Vec3 render_at(const LocalModel& model, const Vec3& x, double max_force, bool* s
   return f;
 }
 
+RenderInput render_input_of(const Snapshot& step) {
+  RenderInput in;
+  in.valid = true;
+  in.render_model = step.render_model;
+  in.render_force = step.render_force;
+  in.target = step.target;
+  in.position_mode = step.position_mode;
+  in.tick = step.tick;
+  in.publish_ns = step.publish_ns;
+  in.command_seq = step.command_seq;
+  return in;
+}
+
 HapticSample render_sample(const RenderInput& model, const DeviceInput& device, double max_force) {
   HapticSample s;
   s.model_tick = model.tick;

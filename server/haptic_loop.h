@@ -32,6 +32,9 @@ struct RenderInput {
   uint64_t command_seq = 0;    // the last command the step applied
 };
 
+// What a step's frame hands the renderer.
+RenderInput render_input_of(const Snapshot& step);
+
 // The newest setPosition.
 struct DeviceInput {
   Vec3 target{0, 0, 0};  // m

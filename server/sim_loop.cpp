@@ -473,18 +473,7 @@ void Simulation::publish() {
   }
   s.publish_ns = now_ns();
   s.deadline_misses = deadline_misses_.load(std::memory_order_relaxed);
-  if (haptic_) {
-    RenderInput in;
-    in.valid = true;
-    in.render_model = s.render_model;
-    in.render_force = s.render_force;
-    in.target = s.target;
-    in.position_mode = s.position_mode;
-    in.tick = s.tick;
-    in.publish_ns = s.publish_ns;
-    in.command_seq = s.command_seq;
-    haptic_->offer_model(in);
-  }
+  if (haptic_) haptic_->offer_model(render_input_of(s));
   status_tick_.store(state.tick, std::memory_order_relaxed);
   status_time_.store(state.time, std::memory_order_relaxed);
   frames_published_.fetch_add(1, std::memory_order_relaxed);
