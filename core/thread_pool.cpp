@@ -66,7 +66,6 @@ void ThreadPool::run_erased(Function function, void* context) {
     remaining_.wait(r, std::memory_order_seq_cst);
   }
   caller_sleeping_.store(false, std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_acquire);
 }
 
 void ThreadPool::worker(int index) {
