@@ -83,6 +83,8 @@ rss_samples_mb), the recovered blow-ups (recoveries) and what the churn did.
                        session's loop then share that one core (the capacity of one core)
   --server-arg ARG     one more argument for the server it starts (repeatable), e.g.
                        --server-arg --spin-us --server-arg 0
+  --set KEY=VALUE      a scene override of the sessions it opens (OpenRequest.overrides;
+                       repeatable), e.g. --set integrator.threads=2
   --connect ADDR:PORT  use this running server instead of starting one
   --server PATH        the server executable to start (default: palpate-server next to
                        this executable)
@@ -102,6 +104,7 @@ struct Args {
   int sessions = 1;
   int server_cpu = -1;  // -1: not pinned
   std::vector<std::string> server_args;
+  std::vector<std::string> overrides;  // --set: scene overrides of every session it opens
   std::string connect;
   std::string server;
 };
@@ -127,6 +130,7 @@ Args parse_args(int argc, char** argv) {
     else if (flag == "--sessions") a.sessions = static_cast<int>(args.integer(1, 64));
     else if (flag == "--server-cpu") a.server_cpu = static_cast<int>(args.integer(0, 1023));
     else if (flag == "--server-arg") a.server_args.push_back(args.value());
+    else if (flag == "--set") a.overrides.push_back(args.value());
     else if (flag == "--connect") a.connect = args.value();
     else if (flag == "--server") a.server = args.value();
     else return false;
@@ -307,8 +311,13 @@ int main(int argc, char** argv) {
     auto& ws = control.getWaitScope();
     auto& timer = control.getIoProvider().getTimer();
     auto server = control.getMain<PalpateServer>();
+    auto set_overrides = [&a](auto request) {
+      auto list = request.initOverrides(static_cast<unsigned>(a.overrides.size()));
+      for (size_t k = 0; k < a.overrides.size(); ++k) list.set(static_cast<unsigned>(k), a.overrides[k]);
+    };
     auto open = server.openSessionRequest();
     open.initRequest().setRateHz(a.rate);
+    set_overrides(open.getRequest());
     auto opened = open.send().wait(ws);
     auto session = opened.getSession();
     const uint32_t particles = opened.getInfo().getParticleCount();
@@ -354,6 +363,7 @@ int main(int argc, char** argv) {
       other_servers.push_back(other_connections.back()->getMain<PalpateServer>());
       auto req = other_servers.back().openSessionRequest();
       req.initRequest().setRateHz(a.rate);
+      set_overrides(req.getRequest());
       sessions.push_back(req.send().wait(ws).getSession());
       auto view = sessions.back().subscribeRequest();
       view.setSink(kj::heap<Recorder>());

@@ -1,5 +1,6 @@
-// palpate-bench-step: single-thread timings of the simulation's hot paths on a
-// scene with the indenter pressed into the body (contact active):
+// palpate-bench-step: timings of the simulation's hot paths on a scene with the
+// indenter pressed into the body (contact active), on one thread and, with --threads N,
+// on N threads in the same run (integrator.threads = N, core/thread_pool.h):
 //   one internal-force evaluation, one RK4 step, one symplectic-Euler step and one
 //   linearly implicit Euler step (step() with the scene's other settings);
 //   and, in the same run, the core's FMA peak (bench/fma_peak.h), of which the force
@@ -13,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -32,6 +34,7 @@
 #include "core/solid.h"
 #include "core/state.h"
 #include "core/step.h"
+#include "core/thread_pool.h"
 
 namespace {
 
@@ -39,8 +42,9 @@ using namespace palpate;
 using Clock = std::chrono::steady_clock;
 
 const char* kUsage = R"(usage: palpate-bench-step [options]
-Times, single thread, one internal-force evaluation and one step of each
-integrator with the indenter pressed into the body; prints medians.
+Times one internal-force evaluation and one step of each integrator with the
+indenter pressed into the body, on one thread (and on N with --threads N, in the
+same run, interleaved); prints medians.
   --scene FILE      scene file (default: scenes/hertz_cube.json of the source tree)
   --per-edge N      override body.distribution.per_edge
   --set KEY=VALUE   override a scene field by its dotted path (repeatable)
@@ -53,6 +57,8 @@ integrator with the indenter pressed into the body; prints medians.
   --press-steps N   RK4 steps of pressing in (default 300), then more (up to 20x)
                     until at least --min-contacts particles are in contact
   --min-contacts N  (default 4)
+  --threads N       also time everything on N threads (integrator.threads = N) and
+                    print the speed-up over one thread (default 1: one thread only)
   --json            print one JSON object instead of the table
 )";
 
@@ -67,7 +73,7 @@ double median(std::vector<double> v) {
 int main(int argc, char** argv) {
   std::filesystem::path scene_file = std::filesystem::path(PALPATE_SOURCE_DIR) / "scenes" / "hertz_cube.json";
   SceneOverrides overrides;
-  int repeats = 300, ie_repeats = 10, press_steps = 300, min_contacts = 4;
+  int repeats = 300, ie_repeats = 10, press_steps = 300, min_contacts = 4, threads = 1;
   double ie_dt = 0.01, press_force = NAN;  // NAN: the scene's largest verification force
   bool json_out = false;
   try {
@@ -83,6 +89,7 @@ int main(int argc, char** argv) {
       else if (arg == "--min-contacts") min_contacts = static_cast<int>(args.integer(1, 100000000));
       else if (arg == "--ie-dt") ie_dt = args.number();
       else if (arg == "--press-force") press_force = args.number();
+      else if (arg == "--threads") threads = static_cast<int>(args.integer(1, kMaxThreads));
       else if (arg == "--json") json_out = true;
       else if (arg == "--help" || arg == "-h") {
         std::cout << kUsage;
@@ -107,6 +114,7 @@ int main(int argc, char** argv) {
   // The tool on the vertical guide: pressed free on a curved body (a dome) it slides off.
   Options held = scene_options;
   held.tool_guide = ToolGuide::vertical;
+  held.integrator.threads = 1;  // pressing in; the timed variants set their own
   Options rk4_opt = held, se_opt = held, ie_opt = held;
   rk4_opt.integrator.type = IntegratorType::rk4;
   se_opt.integrator.type = IntegratorType::symplectic_euler;
@@ -134,63 +142,99 @@ int main(int argc, char** argv) {
     return 1;
   }
   // Every timed operation starts from the pressed state (positions, velocities, indenter
-  // and contact set), restored without allocation; one State serves all integrators.
+  // and contact set), restored without allocation; one State per thread count serves all
+  // integrators.
   const Checkpoint start(pressed);
-  State& timed = pressed;
   bool all_ok = true;
   auto check = [&](StepStatus st) { all_ok = all_ok && st == StepStatus::ok; };
-  Points f(3, n);
+  const Points& start_position = start.saved().position;
 
   // The timed operations, run round-robin (each after its untimed setup) so that
-  // a disturbance of the machine spreads over all of them alike.
+  // a disturbance of the machine spreads over all of them alike -- and over both thread
+  // counts alike.
   struct Op {
     std::function<void()> setup, run;
     int repeats;
     std::vector<double> ms;
   };
   enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_free, health, op_count };
-  std::vector<Op> ops(op_count);
-  auto restore = [&] { start.restore(timed); };
-  const Points& start_position = start.saved().position;
-  // The force evaluation is timed warm (after an untimed one), as in the stages of a step.
-  auto evaluate_forces = [&] { elastic_forces(model, start_position, f); };
-  ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
-  // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
-  Workspace linearized;
-  linearize_elastic(model, start_position, linearized);
-  Points df(3, n);
-  auto apply_tangent = [&] { elastic_force_differential(model, linearized, start.saved().velocity, df); };
-  ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
-  ops[rk4_step] = {restore, [&] { check(step(model, rk4_opt, timed)); }, repeats, {}};
-  ops[rk4_free] = {restore, [&] { free_motion_rk4(model, rk4_opt, timed); }, repeats, {}};
-  ops[rk4_contact] = {[&] { restore(); free_motion_rk4(model, rk4_opt, timed); },
-                      [&] { check(solve_contact(model, rk4_opt, timed)); }, repeats, {}};
-  ops[se_step] = {restore, [&] { check(step(model, se_opt, timed)); }, repeats, {}};
-  ops[se_free] = {restore, [&] { free_motion_symplectic_euler(model, se_opt, timed); }, repeats, {}};
-  // Linearly implicit Euler with a larger step: CG for the free motion plus one CG
-  // solve per contact candidate for the coupled contact response.
-  ops[ie_step] = {restore, [&] { check(step(model, ie_opt, timed)); }, ie_repeats, {}};
-  ops[ie_free] = {restore, [&] { free_motion_implicit_euler(model, ie_opt, timed); }, ie_repeats, {}};
-  // The per-step health checks alone (core/health.h; part of every step above).
-  ops[health] = {[&] { restore(); free_motion_symplectic_euler(model, se_opt, timed); check(solve_contact(model, se_opt, timed)); },
-                 [&] { (void)check_health(model, se_opt, timed, StepStatus::ok); }, repeats, {}};
-  for (Op& op : ops) op.ms.reserve(op.repeats);
+  // Everything timed at one thread count: its own State (and pool), force buffers, options.
+  struct Variant {
+    int threads;
+    State timed;
+    WorkerThreads force_threads;
+    Points f, df;
+    Workspace linearized;
+    Options rk4_opt, se_opt, ie_opt;
+    std::vector<Op> ops;
+  };
+  std::vector<int> thread_counts = {1};
+  if (threads > 1) thread_counts.push_back(threads);
+  std::vector<std::unique_ptr<Variant>> variants;
+  for (int c : thread_counts) {
+    auto v = std::make_unique<Variant>();
+    v->threads = c;
+    v->rk4_opt = rk4_opt;
+    v->se_opt = se_opt;
+    v->ie_opt = ie_opt;
+    for (Options* o : {&v->rk4_opt, &v->se_opt, &v->ie_opt}) o->integrator.threads = c;
+    v->timed = make_state(model, v->rk4_opt);  // its pool: c threads
+    v->force_threads.resize(c, n);
+    v->f.resize(3, n);
+    v->df.resize(3, n);
+    v->linearized.threads.resize(c, n);
+    linearize_elastic(model, start_position, v->linearized);
+    Variant& w = *v;
+    State& timed = w.timed;
+    std::vector<Op>& ops = w.ops;
+    ops.resize(op_count);
+    auto restore = [&w, &start] { start.restore(w.timed); };
+    // The force evaluation is timed warm (after an untimed one), as in the stages of a step.
+    auto evaluate_forces = [&model, &start_position, &w] { elastic_forces(model, start_position, w.f, w.force_threads); };
+    ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
+    // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
+    auto apply_tangent = [&model, &start, &w] { elastic_force_differential(model, w.linearized, start.saved().velocity, w.df); };
+    ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
+    ops[rk4_step] = {restore, [&] { check(step(model, w.rk4_opt, timed)); }, repeats, {}};
+    ops[rk4_free] = {restore, [&] { free_motion_rk4(model, w.rk4_opt, timed); }, repeats, {}};
+    ops[rk4_contact] = {[&, restore] { restore(); free_motion_rk4(model, w.rk4_opt, timed); },
+                        [&] { check(solve_contact(model, w.rk4_opt, timed)); }, repeats, {}};
+    ops[se_step] = {restore, [&] { check(step(model, w.se_opt, timed)); }, repeats, {}};
+    ops[se_free] = {restore, [&] { free_motion_symplectic_euler(model, w.se_opt, timed); }, repeats, {}};
+    // Linearly implicit Euler with a larger step: CG for the free motion plus one CG
+    // solve per contact candidate for the coupled contact response.
+    ops[ie_step] = {restore, [&] { check(step(model, w.ie_opt, timed)); }, ie_repeats, {}};
+    ops[ie_free] = {restore, [&] { free_motion_implicit_euler(model, w.ie_opt, timed); }, ie_repeats, {}};
+    // The per-step health checks alone (core/health.h; part of every step above).
+    ops[health] = {[&, restore] {
+                     restore();
+                     free_motion_symplectic_euler(model, w.se_opt, timed);
+                     check(solve_contact(model, w.se_opt, timed));
+                   },
+                   [&] { (void)check_health(model, w.se_opt, timed, StepStatus::ok); }, repeats, {}};
+    for (Op& op : ops) op.ms.reserve(op.repeats);
+    variants.push_back(std::move(v));
+  }
   // The peak before and after the timed operations; the larger counts (a disturbance only slows).
   bench::FmaPeak peak = bench::measure_fma_peak();
   for (int r = 0; r < std::max(repeats, ie_repeats); ++r)
-    for (Op& op : ops) {
-      if (r >= op.repeats) continue;
-      op.setup();
-      const auto t0 = Clock::now();
-      op.run();
-      const auto t1 = Clock::now();
-      op.ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-    }
+    for (auto& v : variants)
+      for (Op& op : v->ops) {
+        if (r >= op.repeats) continue;
+        op.setup();
+        const auto t0 = Clock::now();
+        op.run();
+        const auto t1 = Clock::now();
+        op.ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+      }
   {
     const bench::FmaPeak after = bench::measure_fma_peak();
     peak.double_gflops = std::max(peak.double_gflops, after.double_gflops);
     peak.single_gflops = std::max(peak.single_gflops, after.single_gflops);
   }
+  const std::vector<Op>& ops = variants[0]->ops;
+  State& timed = variants[0]->timed;
+  auto restore = [&] { start.restore(timed); };
   auto med = [&](int k) { return median(ops[k].ms); };
   // Counted for the MLS solid, every law (the corotational polar iterations at the timed positions).
   const bool flops_counted = is_mls;
@@ -263,6 +307,25 @@ int main(int argc, char** argv) {
   j["health_check_fraction_rk4"] = health_ms / rk4_ms;
   j["health_check_fraction_symplectic_euler"] = health_ms / se_ms;
   j["all_steps_ok"] = all_ok;
+  // The other thread count: its medians and the speed-up (one thread's time over its).
+  const char* kCompared[][2] = {{"force_eval_ms", "internal forces"},
+                                {"force_differential_ms", "tangent K dx"},
+                                {"rk4_step_ms", "RK4 step"},
+                                {"symplectic_euler_step_ms", "symplectic-Euler step"},
+                                {"implicit_euler_step_ms", "implicit-Euler step"}};
+  const int compared_op[] = {force_eval, tangent, rk4_step, se_step, ie_step};
+  if (variants.size() > 1) {
+    const Variant& v = *variants[1];
+    nlohmann::json t;
+    t["threads"] = v.threads;
+    for (int k = 0; k < 5; ++k) {
+      const double ms = median(v.ops[compared_op[k]].ms);
+      t[kCompared[k][0]] = ms;
+      t[std::string(kCompared[k][0]).replace(std::string(kCompared[k][0]).size() - 3, 3, "_speedup")] =
+          median(ops[compared_op[k]].ms) / ms;
+    }
+    j["threads"] = t;
+  }
 
   if (json_out) {
     std::cout << j.dump() << "\n";
@@ -270,7 +333,7 @@ int main(int argc, char** argv) {
     std::printf("palpate-bench-step: %s, %d particles (%d fixed), %d neighbour pairs (%.2f per particle)\n",
                 model.name.c_str(), n, model.fixed_count, nnz, double(nnz) / n);
     std::printf("pressed in with %g N for %d RK4 steps: %d particles in contact\n", press_force, pressing, contacts);
-    std::printf("medians of %d repetitions (implicit Euler: %d), single thread\n\n", repeats, ie_repeats);
+    std::printf("medians of %d repetitions (implicit Euler: %d), one thread\n\n", repeats, ie_repeats);
     std::printf("FMA peak of one core (AVX2, measured in this run): %.1f GFLOP/s double, %.1f GFLOP/s single\n\n",
                 peak.double_gflops, peak.single_gflops);
     if (flops_counted)
@@ -292,6 +355,16 @@ int main(int argc, char** argv) {
     std::printf("  %-34s %10.4f ms\n", "  free motion", ie_free_ms);
     std::printf("  %-34s %10.4f ms   (%.2f %% of an RK4 step, %.2f %% of a symplectic-Euler step)\n",
                 "health checks (in every step)", health_ms, 100 * health_ms / rk4_ms, 100 * health_ms / se_ms);
+    if (variants.size() > 1) {
+      const Variant& v = *variants[1];
+      std::printf("\non %d threads (integrator.threads = %d; the same repetitions, interleaved with the above)\n\n",
+                  v.threads, v.threads);
+      std::printf("  %-34s %10s %10s %9s\n", "", "1 thread", "threads", "speed-up");
+      for (int k = 0; k < 5; ++k) {
+        const double one = median(ops[compared_op[k]].ms), many = median(v.ops[compared_op[k]].ms);
+        std::printf("  %-34s %7.4f ms %7.4f ms %8.2fx\n", kCompared[k][1], one, many, one / many);
+      }
+    }
     if (!all_ok) std::printf("\nwarning: some timed steps did not return ok\n");
   }
   return 0;

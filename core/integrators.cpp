@@ -255,13 +255,13 @@ void free_motion_rk4(const Model& model, const Options& opt, State& state) {
   for (int s = 0; s < 3; ++s) {
     const Points& x_s = s == 0 ? state.position : x_stage;
     const Points& v_s = s == 0 ? state.velocity : v_stage;
-    elastic_forces(model, x_s, w.force);
+    elastic_forces(model, x_s, w.force, w.threads);
     add_contact_forces(state, w.force);
     const Rk4Stage stage{state.position.data(), state.velocity.data(), v_s.data(), x_sum.data(), v_sum.data(),
                          x_stage.data(), v_stage.data(), next_h[s], weight[s], s == 0};
     for_each_acceleration(model, opt, w.force.data(), v_s.data(), stage);
   }
-  elastic_forces(model, x_stage, w.force);
+  elastic_forces(model, x_stage, w.force, w.threads);
   add_contact_forces(state, w.force);
   MotionSums sums;
   const Rk4Update update{v_stage.data(), x_sum.data(), v_sum.data(), state.position.data(), state.velocity.data(),
@@ -274,7 +274,7 @@ void free_motion_rk4(const Model& model, const Options& opt, State& state) {
 void free_motion_symplectic_euler(const Model& model, const Options& opt, State& state) {
   const double dt = opt.integrator.dt;
   Workspace& w = state.work;
-  elastic_forces(model, state.position, w.force);
+  elastic_forces(model, state.position, w.force, w.threads);
   add_contact_forces(state, w.force);
   MotionSums sums;
   const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt, &sums};
@@ -402,7 +402,7 @@ void free_motion_implicit_euler(const Model& model, const Options& opt, State& s
   Workspace& w = state.work;
   const Vec3 g = opt.gravity;
   linearize_elastic(model, state.position, w);
-  elastic_forces(model, state.position, w.force);
+  elastic_forces(model, state.position, w.force, w.threads);
   add_contact_forces(state, w.force);
   elastic_force_differential(model, w, state.velocity, w.cg_Ap);  // -K v
   for (int i = 0; i < model.particle_count; ++i) {

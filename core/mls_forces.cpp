@@ -751,20 +751,21 @@ PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const doub
   }
 }
 
+// Blocks [b_begin, b_end) (b_begin even: the corotational pairs are those of the whole loop).
 template <bool volume_term>
-void internal_forces_blocked(const Model& m, const double* __restrict x, double* __restrict f) {
-  const int blocks = static_cast<int>(m.blocks.size());
-  int b = 0;
+void internal_forces_blocked(const Model& m, int b_begin, int b_end, const double* __restrict x,
+                             double* __restrict f) {
+  int b = b_begin;
   if (m.law == MaterialLaw::corotational)
-    for (; b + 2 <= blocks; b += 2) internal_forces_of_blocks<volume_term, 2>(m, b, x, f);
-  for (; b < blocks; ++b) internal_forces_of_blocks<volume_term, 1>(m, b, x, f);
+    for (; b + 2 <= b_end; b += 2) internal_forces_of_blocks<volume_term, 2>(m, b, x, f);
+  for (; b < b_end; ++b) internal_forces_of_blocks<volume_term, 1>(m, b, x, f);
 }
 
 template <bool volume_term>
-void force_differential_blocked(const Model& m, const double* tangent_F, const double* tangent_S_or_R,
-                                const double* __restrict dx, double* __restrict df) {
+void force_differential_blocked(const Model& m, int b_begin, int b_end, const double* tangent_F,
+                                const double* tangent_S_or_R, const double* __restrict dx, double* __restrict df) {
   const int n = m.particle_count;
-  for (int b = 0; b < static_cast<int>(m.blocks.size()); ++b) {
+  for (int b = b_begin; b < b_end; ++b) {
     const Block& block = m.blocks[b];
     const Slot* begin = m.block_slots.data() + block.slot_begin;
     const Slot* end = m.block_slots.data() + block.slot_end;
@@ -815,6 +816,60 @@ void count_polar_iterations(const Model& m, const double* x, double& iterations,
   }
 }
 
+// The block ranges of a split of the blocked loops over T threads: thread t takes blocks
+// [bounds[t], bounds[t + 1]), the ranges of about equal work (neighbour slots + a per-block
+// cost of the law's stress, in slot units), every bound but the last even (the corotational
+// loop's pairs stay whole). Depends on the model and T only.
+void split_blocks(const Model& m, int T, int* bounds) {
+  const int blocks = static_cast<int>(m.blocks.size());
+  const int64_t per_block = m.law == MaterialLaw::corotational ? 12 : 3;
+  auto cost = [&](int b) { return m.blocks[b].slot_end - m.blocks[b].slot_begin + per_block; };
+  int64_t total = 0;
+  for (int b = 0; b < blocks; ++b) total += cost(b);
+  bounds[0] = 0;
+  int b = 0;
+  int64_t done = 0;
+  for (int t = 1; t < T; ++t) {
+    const int64_t target = total * t / T;
+    while (b + 2 <= blocks && done + cost(b) + cost(b + 1) <= target) {
+      done += cost(b) + cost(b + 1);
+      b += 2;
+    }
+    bounds[t] = b;
+  }
+  bounds[T] = blocks;
+}
+
+// Runs loop(b_begin, b_end, out) -- a blocked loop that adds the forces of blocks
+// [b_begin, b_end) into out -- on the pool's threads over split_blocks' ranges, thread 0
+// into f, thread t > 0 into its own zeroed buffer; then adds the buffers into f in the
+// order t = 1, 2, ..., each thread over its share of the coordinates.
+template <class Loop>
+void scatter_in_parallel(const Model& m, Points& f, WorkerThreads& threads, const Loop& loop) {
+  const int T = threads.count(), n = m.particle_count;
+  for (Points& p : threads.partial)
+    if (p.cols() != n) p.resize(3, n);  // a model other than the State's (allocates once)
+  int bounds[kMaxThreads + 1];
+  split_blocks(m, T, bounds);
+  threads.pool->run([&](int t) {
+    double* out = t == 0 ? f.data() : threads.partial[static_cast<size_t>(t - 1)].data();
+    std::fill(out, out + 3 * static_cast<ptrdiff_t>(n), 0.0);
+    loop(bounds[t], bounds[t + 1], out);
+  });
+  const int64_t coordinates = 3 * int64_t{n};
+  threads.pool->run([&](int t) {
+    double* out = f.data();
+    const int64_t k_begin = coordinates * t / T, k_end = coordinates * (t + 1) / T;
+    for (int u = 1; u < T; ++u) {
+      const double* in = threads.partial[static_cast<size_t>(u - 1)].data();
+      for (int64_t k = k_begin; k < k_end; ++k) out[k] += in[k];
+    }
+  });
+}
+
+void linearize_particles(const Model& m, const Points& x, int i_begin, int i_end, std::vector<double>& tangent_F,
+                         std::vector<double>& tangent_S_or_R);
+
 }  // namespace
 
 bool detail::uses_blocked_loops(const Model& model) { return use_blocks(model); }
@@ -844,12 +899,23 @@ double particle_first_piola_stress(const Model& model, const Mat3& F, int i, Mat
 void mls_internal_forces(const Model& m, const Points& x, Points& f) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   f.setZero();
+  const int blocks = static_cast<int>(m.blocks.size());
   if (!use_blocks(m))
     internal_forces_per_particle(m, x.data(), f.data());
   else if (m.volume_stiffness > 0)
-    internal_forces_blocked<true>(m, x.data(), f.data());
+    internal_forces_blocked<true>(m, 0, blocks, x.data(), f.data());
   else
-    internal_forces_blocked<false>(m, x.data(), f.data());
+    internal_forces_blocked<false>(m, 0, blocks, x.data(), f.data());
+}
+
+void mls_internal_forces(const Model& m, const Points& x, Points& f, WorkerThreads& threads) {
+  if (threads.count() == 1 || !use_blocks(m)) return mls_internal_forces(m, x, f);
+  scatter_in_parallel(m, f, threads, [&](int b_begin, int b_end, double* out) {
+    if (m.volume_stiffness > 0)
+      internal_forces_blocked<true>(m, b_begin, b_end, x.data(), out);
+    else
+      internal_forces_blocked<false>(m, b_begin, b_end, x.data(), out);
+  });
 }
 
 double mls_strain_energy(const Model& m, const Points& x) {
@@ -872,7 +938,25 @@ void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   tangent_F.resize(9 * static_cast<size_t>(m.particle_count));
   tangent_S_or_R.resize(9 * static_cast<size_t>(m.particle_count));
-  for (int i = 0; i < m.particle_count; ++i) {
+  linearize_particles(m, x, 0, m.particle_count, tangent_F, tangent_S_or_R);
+}
+
+void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent_F,
+                   std::vector<double>& tangent_S_or_R, WorkerThreads& threads) {
+  if (threads.count() == 1) return mls_linearize(m, x, tangent_F, tangent_S_or_R);
+  tangent_F.resize(9 * static_cast<size_t>(m.particle_count));
+  tangent_S_or_R.resize(9 * static_cast<size_t>(m.particle_count));
+  const int T = threads.count(), n = m.particle_count;
+  threads.pool->run([&](int t) {
+    linearize_particles(m, x, static_cast<int>(int64_t{n} * t / T), static_cast<int>(int64_t{n} * (t + 1) / T),
+                        tangent_F, tangent_S_or_R);
+  });
+}
+
+namespace {
+void linearize_particles(const Model& m, const Points& x, int i_begin, int i_end, std::vector<double>& tangent_F,
+                         std::vector<double>& tangent_S_or_R) {
+  for (int i = i_begin; i < i_end; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
     Mat3 P, S;
     piola_stress(m, F, m.particle_lambda[i], m.particle_mu[i], P, &S);  // S, or R (corotational), or F^-T (neo-Hookean)
@@ -881,17 +965,31 @@ void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent
     S_out = S;
   }
 }
+}  // namespace
 
 void mls_force_differential(const Model& m, const std::vector<double>& tangent_F,
                         const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   df.setZero();
+  const int blocks = static_cast<int>(m.blocks.size());
   if (!use_blocks(m))
     force_differential_per_particle(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
   else if (m.volume_stiffness > 0)
-    force_differential_blocked<true>(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
+    force_differential_blocked<true>(m, 0, blocks, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
   else
-    force_differential_blocked<false>(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
+    force_differential_blocked<false>(m, 0, blocks, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
+}
+
+void mls_force_differential(const Model& m, const std::vector<double>& tangent_F,
+                            const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df,
+                            WorkerThreads& threads) {
+  if (threads.count() == 1 || !use_blocks(m)) return mls_force_differential(m, tangent_F, tangent_S_or_R, dx, df);
+  scatter_in_parallel(m, df, threads, [&](int b_begin, int b_end, double* out) {
+    if (m.volume_stiffness > 0)
+      force_differential_blocked<true>(m, b_begin, b_end, tangent_F.data(), tangent_S_or_R.data(), dx.data(), out);
+    else
+      force_differential_blocked<false>(m, b_begin, b_end, tangent_F.data(), tangent_S_or_R.data(), dx.data(), out);
+  });
 }
 
 double mls_internal_forces_flops(const Model& m, const Points& x) {

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/model.h"
+#include "core/thread_pool.h"
 #include "core/types.h"
 
 namespace palpate {
@@ -15,6 +16,16 @@ namespace palpate {
 
 // f (3 x n, overwritten) = -dU/dx at positions x (3 x n).
 void mls_internal_forces(const Model& model, const Points& x, Points& f);
+
+// The same on threads.count() threads (core/thread_pool.h): the blocked loop's blocks cut
+// into count() contiguous ranges of about equal work (a pair of blocks never cut, for the
+// corotational law's pairing), thread 0 accumulating its forces into f, thread t > 0 into
+// threads.partial[t - 1], then f += partial[0] + partial[1] + ... coordinate by coordinate,
+// in that order, over count() ranges of coordinates. The split depends on the model and
+// the count only, so results are bit-identical between runs for a given count; count 1
+// (or the per-particle loops, which stay on one thread) is the function above, bit for
+// bit. Other counts differ from it by the order of the sums (round-off).
+void mls_internal_forces(const Model& model, const Points& x, Points& f, WorkerThreads& threads);
 
 // U(x) = sum_i v_i [ 1/2 E:S + k_v/2 (det F - 1)^2 ] + hourglass energy, J.
 double mls_strain_energy(const Model& model, const Points& x);
@@ -37,6 +48,13 @@ void mls_linearize(const Model& model, const Points& x, std::vector<double>& tan
                       std::vector<double>& tangent_S_or_R);
 void mls_force_differential(const Model& model, const std::vector<double>& tangent_F,
                         const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df);
+// The same on threads.count() threads, split as mls_internal_forces (the linearisation by
+// particle ranges: no sums, bit-identical to one thread).
+void mls_linearize(const Model& model, const Points& x, std::vector<double>& tangent_F,
+                   std::vector<double>& tangent_S_or_R, WorkerThreads& threads);
+void mls_force_differential(const Model& model, const std::vector<double>& tangent_F,
+                            const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df,
+                            WorkerThreads& threads);
 
 // Floating-point operations of one mls_internal_forces call at positions x (for the
 // benchmark's GFLOP/s), counted by hand from the blocked loop of the model's law; for the

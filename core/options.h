@@ -22,7 +22,10 @@ struct CouplingOptions {
 };
 
 struct Options {
-  IntegratorSpec integrator;   // scene "integrator": type, dt (s), damping (1/s), CG settings
+  IntegratorSpec integrator;   // scene "integrator": type, dt (s), damping (1/s), CG settings, threads
+                               // (the force loops' threads, 1 ... kMaxThreads: State::work.threads
+                               // follows it at the next step; step() throws std::invalid_argument
+                               // outside that range)
   ContactSpec contact;         // scene "contact": tolerance (m), pivots
   Vec3 gravity{0.0, 0.0, 0.0};  // m/s^2, on the body and the indenter
   HealthSpec health;           // scene "health": per-step checks and their limits

@@ -9,6 +9,7 @@
 #include "core/mesh_reader.h"
 #include "core/node_cloud.h"
 #include "core/resolution.h"
+#include "core/thread_pool.h"
 
 #include <algorithm>
 #include <charconv>
@@ -132,7 +133,7 @@ constexpr std::string_view kIndenterKeys[] = {"radius", "mass", "position", "for
                                               "guide"};
 constexpr std::string_view kContactKeys[] = {"tolerance", "max_iterations"};
 constexpr std::string_view kIntegratorKeys[] = {"type",         "dt", "damping", "cg_tolerance", "cg_max_iterations",
-                                                "allow_unstable_dt"};
+                                                "allow_unstable_dt", "threads"};
 constexpr std::string_view kVerifyKeys[] = {"forces", "rest"};
 constexpr std::string_view kRestKeys[] = {"velocity_tolerance", "force_tolerance", "window", "max_time"};
 constexpr std::string_view kHealthKeys[] = {"enabled", "energy_factor", "max_indenter_speed", "max_penetration",
@@ -706,6 +707,7 @@ void read_integrator(const Reader& r, IntegratorSpec& in) {
   r["cg_tolerance"].get(in.cg_tolerance, open(0.0, 1.0));
   r["cg_max_iterations"].get(in.cg_max_iterations, 1, 1000000);
   r["allow_unstable_dt"].get(in.allow_unstable_dt);
+  r["threads"].get(in.threads, 1, kMaxThreads);
 }
 
 void read_health(const Reader& r, HealthSpec& h) {

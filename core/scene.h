@@ -185,6 +185,9 @@ struct IntegratorSpec {
   double damping = 0.0;          // 1/s, mass-proportional (Rayleigh alpha) damping
   double cg_tolerance = 1e-8;    // implicit Euler: relative residual of the CG solve
   int cg_max_iterations = 1000;  // implicit Euler
+  // Threads of the force loops (the caller's and threads - 1 workers, core/thread_pool.h);
+  // results are bit-identical between runs for a given count.
+  int threads = 1;
   // Explicit integrators: a dt above the measured stable envelope (time_step.h) is
   // refused unless the scene opts in.
   bool allow_unstable_dt = false;

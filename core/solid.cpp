@@ -12,6 +12,13 @@ void elastic_forces(const Model& model, const Points& x, Points& f) {
     mls_internal_forces(model, x, f);
 }
 
+void elastic_forces(const Model& model, const Points& x, Points& f, WorkerThreads& threads) {
+  if (model.solid == SolidKind::hex_fem)
+    hex_internal_forces(model.hex, model.rest_position, x, f);
+  else
+    mls_internal_forces(model, x, f, threads);
+}
+
 double elastic_energy(const Model& model, const Points& x) {
   return model.solid == SolidKind::hex_fem ? hex_strain_energy(model.hex, model.rest_position, x)
                                            : mls_strain_energy(model, x);
@@ -21,14 +28,14 @@ void linearize_elastic(const Model& model, const Points& x, Workspace& work) {
   if (model.solid == SolidKind::hex_fem)
     hex_linearize(model.hex, x, work.tangent_F);  // element rotations (hex FEM)
   else
-    mls_linearize(model, x, work.tangent_F, work.tangent_S_or_R);
+    mls_linearize(model, x, work.tangent_F, work.tangent_S_or_R, work.threads);
 }
 
-void elastic_force_differential(const Model& model, const Workspace& work, const Points& dx, Points& df) {
+void elastic_force_differential(const Model& model, Workspace& work, const Points& dx, Points& df) {
   if (model.solid == SolidKind::hex_fem)
     hex_force_differential(model.hex, work.tangent_F, dx, df);
   else
-    mls_force_differential(model, work.tangent_F, work.tangent_S_or_R, dx, df);
+    mls_force_differential(model, work.tangent_F, work.tangent_S_or_R, dx, df, work.threads);
 }
 
 }  // namespace palpate

@@ -10,11 +10,14 @@ namespace palpate {
 
 // f (3 x n, overwritten) = internal elastic forces at positions x.
 void elastic_forces(const Model& model, const Points& x, Points& f);
+// The same on the threads of a State (Workspace::threads, Options' integrator.threads): the
+// MLS loops split over them (mls_forces.h); the hex FEM on the calling thread.
+void elastic_forces(const Model& model, const Points& x, Points& f, WorkerThreads& threads);
 // Strain energy at x, J.
 double elastic_energy(const Model& model, const Points& x);
 // Tangent stiffness, matrix-free: cache the linearisation point x in `work`,
-// then df = (df/dx) dx = -K dx.
+// then df = (df/dx) dx = -K dx. Both on work.threads (MLS; the hex FEM on the calling thread).
 void linearize_elastic(const Model& model, const Points& x, Workspace& work);
-void elastic_force_differential(const Model& model, const Workspace& work, const Points& dx, Points& df);
+void elastic_force_differential(const Model& model, Workspace& work, const Points& dx, Points& df);
 
 }  // namespace palpate

@@ -41,8 +41,15 @@ State make_state(const Model& model, const Options& opt) {
   w.solve_buffer.reserve(m * m + m);
   w.active.reserve(m);
   w.members.reserve(m);
+  use_threads(model, opt, s);
   reset_health(model, opt, s);
   return s;
+}
+
+void use_threads(const Model& model, const Options& opt, State& state) {
+  WorkerThreads& t = state.work.threads;
+  if (t.count() != opt.integrator.threads || (!t.partial.empty() && t.partial[0].cols() != model.particle_count))
+    t.resize(opt.integrator.threads, model.particle_count);
 }
 
 }  // namespace palpate

@@ -17,6 +17,7 @@
 
 #include "core/model.h"
 #include "core/options.h"
+#include "core/thread_pool.h"
 #include "core/types.h"
 
 namespace palpate {
@@ -144,6 +145,9 @@ struct Workspace {
   std::vector<double> solve_buffer;    // scratch of the active-set solve
   std::vector<int> active;             // active-set membership (0/1 per candidate)
   std::vector<int> members;            // indices of the active candidates
+  // The threads of the force loops (Options' integrator.threads; use_threads()). Not copied
+  // with the State: a copy makes its own pool at its first step.
+  WorkerThreads threads;
 };
 
 struct State : CarriedState {
@@ -155,5 +159,9 @@ struct State : CarriedState {
 // initial force command), all memory sized for every integrator; the health budget
 // starts from it under `opt` (its gravity).
 State make_state(const Model& model, const Options& opt);
+
+// Makes state.work.threads opt.integrator.threads strong for the model (step() calls it:
+// a change of the option between steps starts or stops worker threads there, once).
+void use_threads(const Model& model, const Options& opt, State& state);
 
 }  // namespace palpate

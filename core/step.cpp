@@ -10,6 +10,7 @@ namespace palpate {
 
 StepStatus step(const Model& model, const Options& opt, State& state) {
   StepStatus status = StepStatus::ok;
+  use_threads(model, opt, state);
   switch (opt.integrator.type) {
     case IntegratorType::rk4:
       free_motion_rk4(model, opt, state);

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <string>
 
+#include "core/thread_pool.h"
+
 namespace palpate {
 
 double stability_constant(SolidKind solid, IntegratorType integrator, DistributionType distribution) {
@@ -59,6 +61,9 @@ double stable_time_step(const Model& model, IntegratorType integrator) {
 
 void check_options(const Model& model, const Options& opt) {
   const IntegratorSpec& in = opt.integrator;
+  if (in.threads < 1 || in.threads > kMaxThreads)
+    throw SceneError(model.source, "/integrator/threads",
+                     std::to_string(in.threads) + " threads (1 ... " + std::to_string(kMaxThreads) + ")");
   const double dt_max = stable_time_step(model, in.type);
   if (in.allow_unstable_dt || in.dt <= dt_max) return;
   char text[512];

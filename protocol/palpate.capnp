@@ -185,6 +185,7 @@ struct Integrator {
   cgTolerance @3 :Float64 = 1e-8 $Json.name("cg_tolerance");      # (0, 1)
   cgMaxIterations @4 :Int32 = 1000 $Json.name("cg_max_iterations"); # [1, 1e6]
   allowUnstableDt @5 :Bool = false $Json.name("allow_unstable_dt");  # skip the stable-envelope check
+  threads @6 :Int32 = 1;                                          # [1, 64], threads of the force loops
 }
 struct Health {                  # per-step health checks (core/health.h, docs/scene-format.md)
   enabled @0 :Bool = true;

@@ -19,6 +19,7 @@
 #include "core/hertz.h"
 #include "core/indentation.h"
 #include "core/step.h"
+#include "core/thread_pool.h"
 #include "server/deadlines.h"
 
 namespace palpate::server {
@@ -239,6 +240,7 @@ void Simulation::run_headless() {
   CPU_ZERO(&all);
   for (int k = 0; k < CPU_SETSIZE && k < static_cast<int>(std::thread::hardware_concurrency()); ++k) CPU_SET(k, &all);
   pthread_setaffinity_np(pthread_self(), sizeof all, &all);
+  configure_workers(false);
   start_ns_.store(now_ns(), std::memory_order_relaxed);
   last_tick_ns_.store(start_ns_.load(), std::memory_order_relaxed);
   for (;;) {
@@ -271,6 +273,7 @@ void Simulation::run_realtime() {
     CPU_SET(config_.cpu, &one);
     if (pthread_setaffinity_np(pthread_self(), sizeof one, &one) == 0) pinned_.store(true);
   }
+  configure_workers(true);
   // Touch the stack the steps will use, so that no page fault lands in a tick.
   {
     volatile char stack[256 * 1024];
@@ -295,6 +298,34 @@ void Simulation::run_realtime() {
       skipped_ticks_.fetch_add(static_cast<uint64_t>(o.skipped), std::memory_order_relaxed);
     }
   }
+}
+
+// The workers of the step's pool (integrator.threads > 1; started by make_state on this
+// thread, so with its policy and the RPC thread's affinity) follow the loop: a real-time
+// loop's policy and priority (SCHED_FIFO 10 when granted), and when the loop is pinned to
+// core c, worker t is pinned to core (c + t) mod cores -- on two cores, core 0, the RPC
+// thread's (server/README.md, "Two threads for one session"). Headless: ordinary threads
+// on any core. Each worker sets its own (the pool runs the task on every thread).
+void Simulation::configure_workers(bool realtime) {
+  ThreadPool* pool = state_->work.threads.pool.get();
+  if (!pool) return;
+  int policy = SCHED_OTHER;
+  sched_param param{};
+  if (realtime) pthread_getschedparam(pthread_self(), &policy, &param);
+  const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const bool pin = realtime && pinned_.load();
+  std::atomic<int> refused{0};
+  pool->run([&](int t) {
+    if (t == 0) return;
+    if (pthread_setschedparam(pthread_self(), policy, &param) != 0) refused.fetch_add(1);
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    if (pin) CPU_SET((config_.cpu + t) % cores, &set);
+    else
+      for (int k = 0; k < cores && k < CPU_SETSIZE; ++k) CPU_SET(k, &set);
+    if (pthread_setaffinity_np(pthread_self(), sizeof set, &set) != 0) refused.fetch_add(1);
+  });
+  if (refused.load() > 0) spdlog::warn("{} of the step's worker threads kept their policy or affinity", refused.load());
 }
 
 bool Simulation::tick_once() {

@@ -198,6 +198,7 @@ class Simulation {
   void prepare_and_build();
   void run_realtime();
   void run_headless();
+  void configure_workers(bool realtime);
   // Drains commands and steps once; false when paused (no step).
   bool tick_once();
   void recover(const std::string& what);
