@@ -49,16 +49,19 @@ for ((k = 1; k <= runs; ++k)); do
   done
 done
 /usr/bin/python3 - "$out" <<'PY'
-import glob, json, os, statistics, sys
+import glob, json, os, re, statistics, sys
 folder = sys.argv[1]
 lines = ["| scene | run | ticks | misses (%) | late starts / long steps | skipped | lateness p99 (us) | step p50 / p99 (us) | steal (s) |",
          "|---|---:|---:|---:|---|---:|---:|---|---:|"]
 for scene in ("hertz_cube", "hertz_cube_haptic"):
     rows = []
-    for path in glob.glob(os.path.join(folder, f"{scene}_*.json")):
+    for path in glob.glob(os.path.join(folder, "*.json")):
+        m = re.fullmatch(re.escape(scene) + r"_(\d+)\.json", os.path.basename(path))
+        if not m:
+            continue
         with open(path) as f:
             d = json.load(f)
-        rows.append((int(path.rsplit("_", 1)[1].split(".")[0]), d))
+        rows.append((int(m.group(1)), d))
     rows.sort(key=lambda r: r[0])
     for k, d in rows:
         lines.append(f"| {scene} | {k} | {d['ticks']} | {d['deadline_misses']} ({100 * d['deadline_miss_ratio']:.2f}) | "
