@@ -1,7 +1,8 @@
 // palpate-bench-step: single-thread timings of the simulation's hot paths on a
 // scene with the indenter pressed into the body (contact active):
 //   one internal-force evaluation, one RK4 step, one symplectic-Euler step and one
-//   linearly implicit Euler step (step() with the scene's other settings);
+//   linearly implicit Euler step (step() with the scene's other settings; the second of a
+//   running implicit-Euler simulation, and the first of a fresh State);
 //   and, in the same run, the core's FMA peak (bench/fma_peak.h), of which the force
 //   evaluation's GFLOP/s (flops counted per law, mls_internal_forces_flops) is a fraction.
 // Every timed call starts from the same pressed state (restored, untimed, before
@@ -46,7 +47,8 @@ integrator with the indenter pressed into the body; prints medians.
   --set KEY=VALUE   override a scene field by its dotted path (repeatable)
   --repeats N       repetitions of the force evaluation, RK4 and symplectic-Euler
                     steps (default 300)
-  --ie-repeats N    repetitions of the implicit-Euler step (default 10)
+  --ie-repeats N    repetitions of each implicit-Euler step: the second of a running
+                    simulation, and the first of a fresh State (default 10)
   --ie-dt SECONDS   time step of the implicit-Euler step (default 0.01)
   --press-force N   force pressing the indenter in before timing (default: the
                     largest force of the scene's verify.forces, 327.6 N for hertz_cube)
@@ -148,7 +150,8 @@ int main(int argc, char** argv) {
     int repeats;
     std::vector<double> ms;
   };
-  enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_free, health, op_count };
+  enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_first, ie_free, health,
+         op_count };
   std::vector<Op> ops(op_count);
   auto restore = [&] { start.restore(timed); };
   const Points& start_position = start.saved().position;
@@ -167,9 +170,16 @@ int main(int argc, char** argv) {
                       [&] { check(solve_contact(model, rk4_opt, timed)); }, repeats, {}};
   ops[se_step] = {restore, [&] { check(step(model, se_opt, timed)); }, repeats, {}};
   ops[se_free] = {restore, [&] { free_motion_symplectic_euler(model, se_opt, timed); }, repeats, {}};
-  // Linearly implicit Euler with a larger step: CG for the free motion plus one CG
-  // solve per contact candidate for the coupled contact response.
-  ops[ie_step] = {restore, [&] { check(step(model, ie_opt, timed)); }, ie_repeats, {}};
+  // Linearly implicit Euler with a larger step: CG for the free motion plus the coupled
+  // contact response. Timed as a step of a running implicit-Euler simulation: the second
+  // implicit-Euler step from the pressed state (the first, untimed, is the setup; the
+  // workspace carries whatever the previous step left in it), and as the first implicit-Euler
+  // step of a fresh State (its workspace as make_state leaves it; set up untimed).
+  ops[ie_step] = {[&] { restore(); check(step(model, ie_opt, timed)); }, [&] { check(step(model, ie_opt, timed)); },
+                  ie_repeats, {}};
+  std::optional<State> fresh;
+  ops[ie_first] = {[&] { fresh.emplace(make_state(model, ie_opt)); start.restore(*fresh); },
+                   [&] { check(step(model, ie_opt, *fresh)); }, ie_repeats, {}};
   ops[ie_free] = {restore, [&] { free_motion_implicit_euler(model, ie_opt, timed); }, ie_repeats, {}};
   // The per-step health checks alone (core/health.h; part of every step above).
   ops[health] = {[&] { restore(); free_motion_symplectic_euler(model, se_opt, timed); check(solve_contact(model, se_opt, timed)); },
@@ -197,7 +207,7 @@ int main(int argc, char** argv) {
   const double flops = flops_counted ? mls_internal_forces_flops(model, start_position) : 0.0;
   const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
                rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
-               ie_ms = med(ie_step), ie_free_ms = med(ie_free), health_ms = med(health);
+               ie_ms = med(ie_step), ie_first_ms = med(ie_first), ie_free_ms = med(ie_free), health_ms = med(health);
 
   // What the last timed steps did (every repetition does the same).
   restore();
@@ -205,6 +215,7 @@ int main(int argc, char** argv) {
   const int rk4_contacts = static_cast<int>(timed.contact_index.size());
   const int rk4_candidates = static_cast<int>(timed.out.contact_candidate.size());
   restore();
+  check(step(model, ie_opt, timed));
   check(step(model, ie_opt, timed));
   const int ie_cg_iterations = timed.out.cg_iterations;
   const int ie_candidates = static_cast<int>(timed.out.contact_candidate.size());
@@ -250,6 +261,7 @@ int main(int argc, char** argv) {
       {"contact_and_other_ms", se_ms - se_free_ms},
   };
   j["implicit_euler_step_ms"] = ie_ms;
+  j["implicit_euler_first_step_ms"] = ie_first_ms;
   j["implicit_euler_dt"] = ie_dt;
   j["implicit_euler_repeats"] = ie_repeats;
   j["implicit_euler_cg_iterations"] = ie_cg_iterations;
@@ -290,6 +302,7 @@ int main(int argc, char** argv) {
     std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d contact solves, %d contacts)\n",
                 "implicit-Euler step", ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
     std::printf("  %-34s %10.4f ms\n", "  free motion", ie_free_ms);
+    std::printf("  %-34s %10.4f ms\n", "implicit-Euler first step (fresh)", ie_first_ms);
     std::printf("  %-34s %10.4f ms   (%.2f %% of an RK4 step, %.2f %% of a symplectic-Euler step)\n",
                 "health checks (in every step)", health_ms, 100 * health_ms / rk4_ms, 100 * health_ms / se_ms);
     if (!all_ok) std::printf("\nwarning: some timed steps did not return ok\n");
