@@ -220,6 +220,19 @@ int main(int argc, char** argv) {
   const int ie_cg_iterations = timed.out.cg_iterations;
   const int ie_candidates = static_cast<int>(timed.out.contact_candidate.size());
   const int ie_contacts = static_cast<int>(timed.contact_index.size());
+  const StepOutputs ie_out = timed.out;
+  State first = make_state(model, ie_opt);
+  start.restore(first);
+  check(step(model, ie_opt, first));
+  const StepOutputs ie_first_out = first.out;
+  // The contact stage's CG work (core/contact.h): solves, iterations, compliance columns, splitting iterations.
+  auto contact_work = [](const StepOutputs& o) {
+    return nlohmann::json{{"cg_solves", o.contact_cg_solves},
+                          {"cg_iterations", o.contact_cg_iterations},
+                          {"columns", o.contact_columns},
+                          {"splitting_iterations", o.contact_splitting_iterations},
+                          {"candidates", o.contact_candidate.size()}};
+  };
 
   const double gflops = flops / (force_eval_ms * 1e6);
   const double fraction_of_peak = peak.double_gflops > 0 ? gflops / peak.double_gflops : NAN;
@@ -265,7 +278,10 @@ int main(int argc, char** argv) {
   j["implicit_euler_dt"] = ie_dt;
   j["implicit_euler_repeats"] = ie_repeats;
   j["implicit_euler_cg_iterations"] = ie_cg_iterations;
-  j["implicit_euler_contact_solves"] = ie_candidates;
+  j["implicit_euler_contact_solves"] = ie_out.contact_cg_solves;
+  j["implicit_euler_contact_candidates"] = ie_candidates;
+  j["implicit_euler_contact_work"] = contact_work(ie_out);
+  j["implicit_euler_first_step_contact_work"] = contact_work(ie_first_out);
   j["implicit_euler_contacts"] = ie_contacts;
   j["implicit_euler_step_breakdown"] = {
       {"free_motion_ms", ie_free_ms},
@@ -299,10 +315,15 @@ int main(int argc, char** argv) {
     std::printf("  %-34s %10.4f ms\n", "  other", rk4_ms - rk4_free_ms - rk4_contact_ms);
     std::printf("  %-34s %10.4f ms\n", "symplectic-Euler step", se_ms);
     std::printf("  %-34s %10.4f ms\n", "  free motion", se_free_ms);
-    std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d contact solves, %d contacts)\n",
-                "implicit-Euler step", ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
+    std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d candidates, %d contacts)\n", "implicit-Euler step",
+                ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
     std::printf("  %-34s %10.4f ms\n", "  free motion", ie_free_ms);
-    std::printf("  %-34s %10.4f ms\n", "implicit-Euler first step (fresh)", ie_first_ms);
+    std::printf("  %-34s              (%d CG solves, %d iterations, %d columns, %d splitting iterations)\n",
+                "  contact", ie_out.contact_cg_solves, ie_out.contact_cg_iterations, ie_out.contact_columns,
+                ie_out.contact_splitting_iterations);
+    std::printf("  %-34s %10.4f ms   (contact: %d CG solves, %d iterations, %d columns, %d splitting iterations)\n",
+                "implicit-Euler first step (fresh)", ie_first_ms, ie_first_out.contact_cg_solves,
+                ie_first_out.contact_cg_iterations, ie_first_out.contact_columns, ie_first_out.contact_splitting_iterations);
     std::printf("  %-34s %10.4f ms   (%.2f %% of an RK4 step, %.2f %% of a symplectic-Euler step)\n",
                 "health checks (in every step)", health_ms, 100 * health_ms / rk4_ms, 100 * health_ms / se_ms);
     if (!all_ok) std::printf("\nwarning: some timed steps did not return ok\n");
