@@ -2,7 +2,8 @@
 // indenter pressed into the body (contact active), on one thread and, with --threads N,
 // on N threads in the same run (integrator.threads = N, core/thread_pool.h):
 //   one internal-force evaluation, one RK4 step, one symplectic-Euler step and one
-//   linearly implicit Euler step (step() with the scene's other settings);
+//   linearly implicit Euler step (step() with the scene's other settings; the second of a
+//   running implicit-Euler simulation, and the first of a fresh State);
 //   and, in the same run, the core's FMA peak (bench/fma_peak.h), of which the force
 //   evaluation's GFLOP/s (flops counted per law, mls_internal_forces_flops) is a fraction.
 // Every timed call starts from the same pressed state (restored, untimed, before
@@ -50,7 +51,8 @@ same run, interleaved); prints medians.
   --set KEY=VALUE   override a scene field by its dotted path (repeatable)
   --repeats N       repetitions of the force evaluation, RK4 and symplectic-Euler
                     steps (default 300)
-  --ie-repeats N    repetitions of the implicit-Euler step (default 10)
+  --ie-repeats N    repetitions of each implicit-Euler step: the second of a running
+                    simulation, and the first of a fresh State (default 10)
   --ie-dt SECONDS   time step of the implicit-Euler step (default 0.01)
   --press-force N   force pressing the indenter in before timing (default: the
                     largest force of the scene's verify.forces, 327.6 N for hertz_cube)
@@ -157,7 +159,8 @@ int main(int argc, char** argv) {
     int repeats;
     std::vector<double> ms;
   };
-  enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_free, health, op_count };
+  enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_first, ie_free, health,
+         op_count };
   // Everything timed at one thread count: its own State (and pool), force buffers, options.
   struct Variant {
     int threads;
@@ -166,6 +169,7 @@ int main(int argc, char** argv) {
     Points f, df;
     Workspace linearized;
     Options rk4_opt, se_opt, ie_opt;
+    std::optional<State> fresh;  // the fresh State of the first implicit-Euler step
     std::vector<Op> ops;
   };
   std::vector<int> thread_counts = {1};
@@ -201,9 +205,15 @@ int main(int argc, char** argv) {
                         [&] { check(solve_contact(model, w.rk4_opt, timed)); }, repeats, {}};
     ops[se_step] = {restore, [&] { check(step(model, w.se_opt, timed)); }, repeats, {}};
     ops[se_free] = {restore, [&] { free_motion_symplectic_euler(model, w.se_opt, timed); }, repeats, {}};
-    // Linearly implicit Euler with a larger step: CG for the free motion plus one CG
-    // solve per contact candidate for the coupled contact response.
-    ops[ie_step] = {restore, [&] { check(step(model, w.ie_opt, timed)); }, ie_repeats, {}};
+    // Linearly implicit Euler with a larger step: CG for the free motion plus the coupled
+    // contact response. Timed as a step of a running implicit-Euler simulation: the second
+    // implicit-Euler step from the pressed state (the first, untimed, is the setup; the
+    // workspace carries whatever the previous step left in it), and as the first implicit-Euler
+    // step of a fresh State (its workspace as make_state leaves it; set up untimed).
+    ops[ie_step] = {[&, restore] { restore(); check(step(model, w.ie_opt, timed)); },
+                    [&] { check(step(model, w.ie_opt, timed)); }, ie_repeats, {}};
+    ops[ie_first] = {[&] { w.fresh.emplace(make_state(model, w.ie_opt)); start.restore(*w.fresh); },
+                     [&] { check(step(model, w.ie_opt, *w.fresh)); }, ie_repeats, {}};
     ops[ie_free] = {restore, [&] { free_motion_implicit_euler(model, w.ie_opt, timed); }, ie_repeats, {}};
     // The per-step health checks alone (core/health.h; part of every step above).
     ops[health] = {[&, restore] {
@@ -241,7 +251,7 @@ int main(int argc, char** argv) {
   const double flops = flops_counted ? mls_internal_forces_flops(model, start_position) : 0.0;
   const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
                rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
-               ie_ms = med(ie_step), ie_free_ms = med(ie_free), health_ms = med(health);
+               ie_ms = med(ie_step), ie_first_ms = med(ie_first), ie_free_ms = med(ie_free), health_ms = med(health);
 
   // What the last timed steps did (every repetition does the same).
   restore();
@@ -250,9 +260,23 @@ int main(int argc, char** argv) {
   const int rk4_candidates = static_cast<int>(timed.out.contact_candidate.size());
   restore();
   check(step(model, ie_opt, timed));
+  check(step(model, ie_opt, timed));
   const int ie_cg_iterations = timed.out.cg_iterations;
   const int ie_candidates = static_cast<int>(timed.out.contact_candidate.size());
   const int ie_contacts = static_cast<int>(timed.contact_index.size());
+  const StepOutputs ie_out = timed.out;
+  State first = make_state(model, ie_opt);
+  start.restore(first);
+  check(step(model, ie_opt, first));
+  const StepOutputs ie_first_out = first.out;
+  // The contact stage's CG work (core/contact.h): solves, iterations, compliance columns, splitting iterations.
+  auto contact_work = [](const StepOutputs& o) {
+    return nlohmann::json{{"cg_solves", o.contact_cg_solves},
+                          {"cg_iterations", o.contact_cg_iterations},
+                          {"columns", o.contact_columns},
+                          {"splitting_iterations", o.contact_splitting_iterations},
+                          {"candidates", o.contact_candidate.size()}};
+  };
 
   const double gflops = flops / (force_eval_ms * 1e6);
   const double fraction_of_peak = peak.double_gflops > 0 ? gflops / peak.double_gflops : NAN;
@@ -294,10 +318,14 @@ int main(int argc, char** argv) {
       {"contact_and_other_ms", se_ms - se_free_ms},
   };
   j["implicit_euler_step_ms"] = ie_ms;
+  j["implicit_euler_first_step_ms"] = ie_first_ms;
   j["implicit_euler_dt"] = ie_dt;
   j["implicit_euler_repeats"] = ie_repeats;
   j["implicit_euler_cg_iterations"] = ie_cg_iterations;
-  j["implicit_euler_contact_solves"] = ie_candidates;
+  j["implicit_euler_contact_solves"] = ie_out.contact_cg_solves;
+  j["implicit_euler_contact_candidates"] = ie_candidates;
+  j["implicit_euler_contact_work"] = contact_work(ie_out);
+  j["implicit_euler_first_step_contact_work"] = contact_work(ie_first_out);
   j["implicit_euler_contacts"] = ie_contacts;
   j["implicit_euler_step_breakdown"] = {
       {"free_motion_ms", ie_free_ms},
@@ -350,9 +378,15 @@ int main(int argc, char** argv) {
     std::printf("  %-34s %10.4f ms\n", "  other", rk4_ms - rk4_free_ms - rk4_contact_ms);
     std::printf("  %-34s %10.4f ms\n", "symplectic-Euler step", se_ms);
     std::printf("  %-34s %10.4f ms\n", "  free motion", se_free_ms);
-    std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d contact solves, %d contacts)\n",
-                "implicit-Euler step", ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
+    std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d candidates, %d contacts)\n", "implicit-Euler step",
+                ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
     std::printf("  %-34s %10.4f ms\n", "  free motion", ie_free_ms);
+    std::printf("  %-34s              (%d CG solves, %d iterations, %d columns, %d splitting iterations)\n",
+                "  contact", ie_out.contact_cg_solves, ie_out.contact_cg_iterations, ie_out.contact_columns,
+                ie_out.contact_splitting_iterations);
+    std::printf("  %-34s %10.4f ms   (contact: %d CG solves, %d iterations, %d columns, %d splitting iterations)\n",
+                "implicit-Euler first step (fresh)", ie_first_ms, ie_first_out.contact_cg_solves,
+                ie_first_out.contact_cg_iterations, ie_first_out.contact_columns, ie_first_out.contact_splitting_iterations);
     std::printf("  %-34s %10.4f ms   (%.2f %% of an RK4 step, %.2f %% of a symplectic-Euler step)\n",
                 "health checks (in every step)", health_ms, 100 * health_ms / rk4_ms, 100 * health_ms / se_ms);
     if (variants.size() > 1) {

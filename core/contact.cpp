@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 namespace palpate {
 
@@ -56,8 +57,8 @@ int projected_gauss_seidel(int m, const double* W, const double* g, double* lamb
 }  // namespace
 
 int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda, double tolerance,
-                        int max_iterations, Workspace& work) {
-  // Principal pivoting: guess the active set {g < 0}, solve W_AA lambda_A = -g_A,
+                        int max_iterations, Workspace& work, const int* initial_active) {
+  // Principal pivoting: guess the active set ({g < 0} unless given), solve W_AA lambda_A = -g_A,
   // drop the most negative multiplier or add the most violated gap, repeat.
   std::vector<int>& active = work.active;
   std::vector<double>& buf = work.solve_buffer;
@@ -67,7 +68,7 @@ int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda,
   double* rhs = L + m * m;
   work.members.resize(m);
   int* members = work.members.data();
-  for (int a = 0; a < m; ++a) active[a] = g[a] < 0;
+  for (int a = 0; a < m; ++a) active[a] = initial_active ? initial_active[a] != 0 : g[a] < 0;
   for (int iteration = 1; iteration <= max_iterations; ++iteration) {
     int k = 0;
     for (int a = 0; a < m; ++a)
@@ -110,6 +111,198 @@ int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda,
   const int sweeps = projected_gauss_seidel(m, W, g, lambda, tolerance, 100 * max_iterations);
   return sweeps < 0 ? -1 : max_iterations + sweeps;
 }
+
+namespace {
+
+// Implicit Euler's coupled contact (docs/physics.md §2, (2.17), (2.18)).
+constexpr double kColumnTolerance = 1e-4;  // residual of a cached column's CG solve (unit load), N
+constexpr double kDirectionTurn = 0.99863;  // cos 3°: a column whose candidate's normal turned further is recomputed
+constexpr int64_t kKeepSolves = 100;        // a cached particle no candidate for this many solves is dropped
+constexpr int kJudgeAfter = 3;              // splitting iterations before W~ is judged by its contraction:
+constexpr double kSlowContraction = 0.25;  // |nu_k+1 - nu_k| above this of the previous step: every column
+                                           // is recomputed to cg_tolerance (once a solve)
+constexpr int kMaxSplitting = 16;           // splitting iterations before the solve gives up
+constexpr double kSplittingTolerance = 1.0;  // converged: |nu_k+1 - nu_k| <= this cg_tolerance max(|nu|, |p|)
+
+// The LCPs of an implicit step, w = q + W (nu - p) >= 0, nu >= 0, nu . w = 0, with the Delassus
+// operator of the step's A: W (nu - p) = dt^2 J u + the tool's part, u = A^-1 J^T (nu - p)
+// (work.contact_response). They are solved by the splitting (2.18) on the approximation W~
+// of (2.17) in work.delassus: one CG solve per iteration.
+class CoupledContact {
+ public:
+  CoupledContact(const Model& model, const Options& opt, State& state, LinearResponse& A)
+      : model_(model), opt_(opt), state_(state), work_(state.work), A_(A), m_(static_cast<int>(state.out.contact_candidate.size())),
+        dt2_(opt.integrator.dt * opt.integrator.dt), inv_sphere_mass_(1.0 / tool_effective_mass(opt)),
+        axes_(tool_axes(opt)) {
+    const size_t m = static_cast<size_t>(m_);
+    if (work_.splitting.size() < 4 * m) work_.splitting.resize(4 * m);
+    if (work_.guess.size() < m) work_.guess.resize(m);
+  }
+
+  // (2.17): makes the cache hold a column of every candidate, computing those it does not
+  // hold, those whose direction turned by more than kDirectionTurn and, with `all`, every
+  // one (the CG to `tolerance`, N per unit load), then writes W~ (body and tool) to work.delassus.
+  void load_columns(bool all, double tolerance) {
+    ComplianceCache& c = work_.compliance;
+    const std::vector<int>& candidate = state_.out.contact_candidate;
+    if (c.slot.size() != static_cast<size_t>(model_.particle_count)) c.slot.assign(model_.particle_count, -1);
+    if (c.dt != opt_.integrator.dt || c.damping != opt_.integrator.damping) {  // another A: start again
+      for (int s = 0; s < c.capacity; ++s)
+        if (c.particle[s] >= 0) c.slot[c.particle[s]] = -1;
+      std::fill(c.particle.begin(), c.particle.end(), -1);
+      c.dt = opt_.integrator.dt;
+      c.damping = opt_.integrator.damping;
+    }
+    if (!all) {
+      ++c.solves;
+      for (int s = 0; s < c.capacity; ++s)  // drop the particles that stopped being candidates long ago
+        if (c.particle[s] >= 0 && c.last_used[s] < c.solves - kKeepSolves) {
+          c.slot[c.particle[s]] = -1;
+          c.particle[s] = -1;
+        }
+    }
+    for (int a = 0; a < m_; ++a) {
+      const int i = candidate[a];
+      const Vec3 n = work_.normal.col(a);
+      int s = c.slot[i];
+      const bool cached = s >= 0;
+      if (!cached) s = allocate_slot(i);
+      c.last_used[s] = c.solves;
+      if (cached && !all && n.dot(c.direction.col(s)) >= kDirectionTurn) continue;
+      // The column of particle i: dt^2 n_t . (A^-1 n)_t at every cached particle t.
+      work_.rhs.setZero();
+      work_.rhs.col(i) = n;
+      count_solve(A_.solve(work_.rhs, work_.dv, tolerance));
+      ++state_.out.contact_columns;
+      c.direction.col(s) = n;
+      const int cap = c.capacity;
+      for (int t = 0; t < cap; ++t) {
+        if (c.particle[t] < 0) continue;
+        const double e = dt2_ * c.direction.col(t).dot(work_.dv.col(c.particle[t]));
+        c.entry[static_cast<size_t>(t) * cap + s] = c.entry[static_cast<size_t>(s) * cap + t] = e;
+      }
+    }
+    // W~ = the cached body part + the tool's part (2.4).
+    const int cap = c.capacity;
+    double* W = work_.delassus.data();
+    for (int a = 0; a < m_; ++a) {
+      const size_t row = static_cast<size_t>(c.slot[candidate[a]]) * cap;
+      for (int b = 0; b < m_; ++b)
+        W[a * m_ + b] = c.entry[row + c.slot[candidate[b]]] + tool_part(a, work_.normal.col(b));
+    }
+  }
+
+  // w = q + W (nu - p) with u = A^-1 J^T (nu - p) current (q = inf stays inf).
+  void residual(const double* q, const double* nu, double* w) const {
+    const double* p = work_.previous_multiplier.data();
+    Vec3 sphere = Vec3::Zero();
+    for (int b = 0; b < m_; ++b) sphere += (nu[b] - p[b]) * axes_.cwiseProduct(work_.normal.col(b));
+    for (int a = 0; a < m_; ++a) {
+      const Vec3 n = work_.normal.col(a);
+      w[a] = q[a] + dt2_ * (n.dot(work_.contact_response.col(state_.out.contact_candidate[a])) + inv_sphere_mass_ * n.dot(sphere));
+    }
+  }
+
+  // Solves the LCP from nu (u its response, w its residual) by (2.18); on return nu, u and w
+  // are the solution's. Returns the pivots used, or -1 when it did not converge.
+  int solve(const double* q, double* nu, double* w) {
+    const double* p = work_.previous_multiplier.data();
+    const double* W = work_.delassus.data();
+    double* q_k = work_.splitting.data();
+    double* next = q_k + m_;
+    double* delta = next + m_;
+    int* guess = work_.guess.data();
+    const double cg_tolerance = opt_.integrator.cg_tolerance;
+    int pivots = 0;
+    bool refreshed = false;
+    double previous_step = INFINITY;
+    for (int k = 1;; ++k) {
+      // (2.18): nu_k+1 solves the LCP of W~ with w_k + W~ (nu_k+1 - nu_k), pivoting from nu_k's set.
+      for (int a = 0; a < m_; ++a) {
+        double s = w[a];
+        for (int b = 0; b < m_; ++b) s -= W[a * m_ + b] * nu[b];
+        q_k[a] = s;
+        guess[a] = std::isfinite(w[a]) && (nu[a] > 0.0 || w[a] < 0.0);
+      }
+      const int iterations = solve_signorini_lcp(m_, W, q_k, next, opt_.contact.tolerance, opt_.contact.max_iterations, work_, guess);
+      pivots += std::max(iterations, 0);
+      double step2 = 0.0, nu2 = 0.0, p2 = 0.0;
+      for (int a = 0; a < m_; ++a) {
+        delta[a] = next[a] - nu[a];
+        step2 += delta[a] * delta[a];
+        nu2 += next[a] * next[a];
+        p2 += p[a] * p[a];
+      }
+      // The response to the contact forces to cg_tolerance, as the free motion's CG solves its load.
+      const double scale = std::sqrt(std::max(nu2, p2));
+      add_response(delta, cg_tolerance * scale);
+      std::copy(next, next + m_, nu);
+      residual(q, nu, w);
+      ++state_.out.contact_splitting_iterations;
+      const double step = std::sqrt(step2);
+      if (iterations >= 0 && step <= kSplittingTolerance * cg_tolerance * scale) return pivots;
+      if (k >= kMaxSplitting) return -1;
+      if (!refreshed && k >= kJudgeAfter && (iterations < 0 || step > kSlowContraction * previous_step)) {
+        load_columns(true, cg_tolerance);  // W~ too far from W: W itself
+        refreshed = true;
+      }
+      previous_step = step;
+    }
+  }
+
+ private:
+  double tool_part(int a, const Vec3& n_b) const {
+    return dt2_ * inv_sphere_mass_ * work_.normal.col(a).dot(axes_.cwiseProduct(n_b));
+  }
+
+  void count_solve(int iterations) {
+    ++state_.out.contact_cg_solves;
+    state_.out.contact_cg_iterations += iterations >= 0 ? iterations : opt_.integrator.cg_max_iterations;
+  }
+
+  // u += A^-1 J^T delta, to a residual of `residual_norm` (nothing to do when |delta| is below it).
+  void add_response(const double* delta, double residual_norm) {
+    double norm2 = 0.0;
+    for (int a = 0; a < m_; ++a) norm2 += delta[a] * delta[a];
+    if (std::sqrt(norm2) <= residual_norm) return;
+    work_.rhs.setZero();
+    for (int a = 0; a < m_; ++a) work_.rhs.col(state_.out.contact_candidate[a]) = delta[a] * work_.normal.col(a);
+    count_solve(A_.solve(work_.rhs, work_.dv, residual_norm));
+    work_.contact_response += work_.dv;
+  }
+
+  // A free slot for particle i, the cache grown (its entries moved) when there is none.
+  int allocate_slot(int i) {
+    ComplianceCache& c = work_.compliance;
+    int s = static_cast<int>(std::find(c.particle.begin(), c.particle.end(), -1) - c.particle.begin());
+    if (s == c.capacity) {
+      const int old = c.capacity, cap = std::max(64, 2 * old);
+      std::vector<double> entry(static_cast<size_t>(cap) * cap, 0.0);
+      for (int r = 0; r < old; ++r)
+        std::copy(c.entry.begin() + static_cast<ptrdiff_t>(r) * old, c.entry.begin() + static_cast<ptrdiff_t>(r + 1) * old,
+                  entry.begin() + static_cast<ptrdiff_t>(r) * cap);
+      c.entry.swap(entry);
+      c.particle.resize(cap, -1);
+      c.last_used.resize(cap, 0);
+      c.direction.conservativeResize(3, cap);
+      c.capacity = cap;
+    }
+    c.particle[s] = i;
+    c.slot[i] = s;
+    return s;
+  }
+
+  const Model& model_;
+  const Options& opt_;
+  State& state_;
+  Workspace& work_;
+  LinearResponse& A_;
+  const int m_;
+  const double dt2_, inv_sphere_mass_;
+  const Vec3 axes_;
+};
+
+}  // namespace
 
 StepStatus solve_contact(const Model& model, const Options& opt, State& state, LinearResponse* coupled) {
   Workspace& work = state.work;
@@ -156,59 +349,50 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   state.indenter_contact_force.setZero();
   state.out.contact_iterations = 0;
   state.out.contact_max_penetration = 0.0;
+  state.out.contact_columns = state.out.contact_splitting_iterations = 0;
+  state.out.contact_cg_solves = state.out.contact_cg_iterations = 0;
   if (m == 0) return StepStatus::ok;
 
   // Delassus operator W = dt^2 J M^-1 J^T, the sphere's translations included:
   // W_ab = dt^2 [ n_a . (response of particle a to a unit force n_b on b) + n_a . P n_b / M ],
-  // P = diag(tool_axes): the axes the tool moves along (a guided axis has infinite mass).
+  // P = diag(tool_axes): the axes the tool moves along (a guided axis has infinite mass) (2.4).
+  // For implicit Euler, the body's response is A^-1: W~ of (2.17) here, the exact W in the splitting.
   const double dt2 = dt * dt;
   const double inv_sphere_mass = 1.0 / tool_effective_mass(opt);  // with a coupling: implicit in it
   const Vec3 axes = tool_axes(opt);
   work.delassus.resize(static_cast<size_t>(m) * m);
   double* W = work.delassus.data();
+  std::optional<CoupledContact> implicit;
   if (coupled) {
-    if (work.contact_response.cols() < static_cast<Eigen::Index>(n) * m)
-      work.contact_response.resize(3, static_cast<Eigen::Index>(n) * m);
-    for (int b = 0; b < m; ++b) {
-      work.rhs.setZero();
-      work.rhs.col(candidate[b]) = work.normal.col(b);
-      Eigen::Map<Points> response(work.contact_response.data() + 3 * static_cast<size_t>(n) * b, 3, n);
-      coupled->solve(work.rhs, work.dv);
-      response = work.dv;
-      for (int a = 0; a < m; ++a) W[a * m + b] = dt2 * work.normal.col(a).dot(response.col(candidate[a]));
-    }
-    for (int a = 0; a < m; ++a)  // symmetrise the CG round-off
-      for (int b = 0; b < a; ++b) W[a * m + b] = W[b * m + a] = 0.5 * (W[a * m + b] + W[b * m + a]);
+    implicit.emplace(model, opt, state, *coupled);
+    implicit->load_columns(false, std::max(kColumnTolerance, opt.integrator.cg_tolerance));
   } else {
     for (int a = 0; a < m; ++a)
       for (int b = 0; b < m; ++b) W[a * m + b] = (a == b) ? dt2 * model.inverse_mass[candidate[a]] : 0.0;
+    for (int a = 0; a < m; ++a)
+      for (int b = 0; b < m; ++b)
+        W[a * m + b] += dt2 * inv_sphere_mass * work.normal.col(a).dot(axes.cwiseProduct(work.normal.col(b)));
   }
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      W[a * m + b] += dt2 * inv_sphere_mass * work.normal.col(a).dot(axes.cwiseProduct(work.normal.col(b)));
 
   // Replaces the previous contact forces (held over the free motion) by `total`:
-  // particles += gain M^-1 (total_a n_a - f_prev,a), the tool likewise with the
-  // reactions. Returns the contact force of `total` on the tool.
-  const double* previous = work.previous_multiplier.data();
+  // particles += gain M^-1 (total_a n_a - f_prev,a) (implicit Euler: gain A^-1 J^T (total - p),
+  // work.contact_response), the tool likewise with the reactions. Returns the contact force
+  // of `total` on the tool.
   auto apply = [&](const double* total, double gain, Points& particles, Vec3& indenter) {
     Vec3 sphere_force = Vec3::Zero(), sphere_previous = Vec3::Zero();
     for (int a = 0; a < m; ++a) {
       const int i = candidate[a];
       const Vec3 f = total[a] * work.normal.col(a);
-      if (!coupled) {
-        particles.col(i) += (gain * model.inverse_mass[i]) * (f - work.previous_force.col(a));
-      } else if (total[a] != previous[a]) {
-        Eigen::Map<const Points> response(work.contact_response.data() + 3 * static_cast<size_t>(n) * a, 3, n);
-        particles += (gain * (total[a] - previous[a])) * response;
-      }
+      if (!coupled) particles.col(i) += (gain * model.inverse_mass[i]) * (f - work.previous_force.col(a));
       sphere_force -= f;
       sphere_previous -= work.previous_force.col(a);
     }
+    if (coupled) particles += gain * work.contact_response;
     indenter += gain * inv_sphere_mass * axes.cwiseProduct(sphere_force - sphere_previous);
     return sphere_force;
   };
   // The LCPs are posed in the total multipliers: g' = (g - W p) + W lambda, p the previous ones.
+  const double* previous = work.previous_multiplier.data();
   auto shift_by_previous = [&](double* g) {
     for (int a = 0; a < m; ++a)
       for (int b = 0; b < m; ++b) g[a] -= W[a * m + b] * previous[b];
@@ -217,8 +401,19 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   // 1. Position projection.
   work.multiplier.resize(m);
   double* lambda = work.multiplier.data();
-  shift_by_previous(work.gap.data());
-  int iterations = solve_signorini_lcp(m, W, work.gap.data(), lambda, tolerance, max_iterations, work);
+  int iterations = 0;
+  if (coupled) {
+    // From lambda = p, where u = 0 and w = g; the exact gaps at the solution end in work.gap.
+    std::copy(previous, previous + m, lambda);
+    work.contact_response.setZero();
+    double* w = work.splitting.data() + 3 * m;
+    std::copy(work.gap.begin(), work.gap.end(), w);
+    iterations = implicit->solve(work.gap.data(), lambda, w);
+    std::copy(w, w + m, work.gap.begin());
+  } else {
+    shift_by_previous(work.gap.data());
+    iterations = solve_signorini_lcp(m, W, work.gap.data(), lambda, tolerance, max_iterations, work);
+  }
   bool converged = iterations >= 0;
   state.out.contact_iterations = std::max(iterations, 0);
   apply(lambda, dt2, state.position, state.indenter_center);
@@ -226,7 +421,8 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   // Gaps after the projection: who is touching, and the penetration left.
   for (int a = 0; a < m; ++a) {
     double w = work.gap[a];
-    for (int b = 0; b < m; ++b) w += W[a * m + b] * lambda[b];
+    if (!coupled)
+      for (int b = 0; b < m; ++b) w += W[a * m + b] * lambda[b];
     work.gap[a] = w;
     state.out.contact_max_penetration = std::max(state.out.contact_max_penetration, -w);
   }
@@ -240,9 +436,16 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
     work.gap[a] = work.normal.col(a).dot(v_rel) * dt;
     if (!touching) work.gap[a] = INFINITY;
   }
-  shift_by_previous(work.gap.data());
   double* mu = lambda;  // lambda has been applied: reuse its buffer
-  iterations = solve_signorini_lcp(m, W, work.gap.data(), mu, tolerance, max_iterations, work);
+  if (coupled) {
+    // From mu = lambda, whose response u is at hand.
+    double* w = work.splitting.data() + 3 * m;
+    implicit->residual(work.gap.data(), mu, w);
+    iterations = implicit->solve(work.gap.data(), mu, w);
+  } else {
+    shift_by_previous(work.gap.data());
+    iterations = solve_signorini_lcp(m, W, work.gap.data(), mu, tolerance, max_iterations, work);
+  }
   converged = converged && iterations >= 0;
   state.out.contact_iterations += std::max(iterations, 0);
   // mu is the contact force of the step (momentum exchanged / dt): the state reports it.

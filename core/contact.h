@@ -16,30 +16,37 @@
 //    (momentum exchanged / dt) and is what the state reports.
 // Both are M-metric projections, so momentum is conserved and the rest state is a
 // fixed point of every integrator (the free motion pushes in, the projections
-// push back exactly). For implicit Euler, M is replaced by the step operator A.
+// push back exactly). For implicit Euler, M is replaced by the step operator A, and W is
+// not formed (one CG solve per candidate): the LCPs are solved by the splitting (2.18) on
+// compliance columns cached across steps (2.17, Workspace::compliance), one CG solve of A
+// per iteration, to the same solution (docs/physics.md §2, "Implicit Euler's contact").
 #include "core/model.h"
 #include "core/options.h"
 #include "core/state.h"
 
 namespace palpate {
 
-// The coupled response of an implicit step: out = A^-1 load over the free DOFs.
+// The coupled response of an implicit step: out = A^-1 load over the free DOFs, to a
+// residual |load - A out| <= residual_norm (N). Returns the iterations used, -1 if the
+// residual was not reached. The operator must not change during one solve_contact.
 class LinearResponse {
  public:
   virtual ~LinearResponse() = default;
-  virtual void solve(const Points& load, Points& out) = 0;
+  virtual int solve(const Points& load, Points& out, double residual_norm) = 0;
 };
 
 // Solves and applies the contact of one step. With coupled == nullptr the
-// particles respond through their lumped inverse masses (explicit integrators). Returns
+// particles respond through their lumped inverse masses (explicit integrators); with the
+// step operator A of implicit Euler, through A^-1 (state.out counts its CG work). Returns
 // contact_not_converged when neither pivoting nor projected Gauss-Seidel met the
 // tolerance (the best multipliers found are still applied).
 StepStatus solve_contact(const Model& model, const Options& opt, State& state, LinearResponse* coupled = nullptr);
 
 // Solves the LCP  w = g + W lambda, lambda >= 0, w >= -tolerance, lambda . w = 0 for a
-// symmetric positive definite W (m x m, row-major). Returns the number of pivots
-// (or sweeps) used, or -1 when it did not converge. Scratch comes from `work`.
+// symmetric positive definite W (m x m, row-major). Pivoting starts from the active set
+// initial_active (m flags; nullptr: {g < 0}). Returns the number of pivots (or sweeps)
+// used, or -1 when it did not converge. Scratch comes from `work`.
 int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda, double tolerance,
-                        int max_iterations, Workspace& work);
+                        int max_iterations, Workspace& work, const int* initial_active = nullptr);
 
 }  // namespace palpate

@@ -344,7 +344,7 @@ ImplicitEulerOperator::ImplicitEulerOperator(const Model& model, const Options& 
 
 void ImplicitEulerOperator::apply(const Points& p, Points& Ap) { apply_step_operator(model_, opt_, state_, p, Ap); }
 
-int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x) {
+int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x, double residual_norm) {
   // Preconditioned CG with the Jacobi preconditioner of the mass part, z = r / ((1 + dt c) m),
   // in three passes per iteration: A p (with p . A p), then x, r and r . r, r . z, then p.
   Workspace& w = state_.work;
@@ -368,9 +368,9 @@ int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x) {
     r_z.add(r * z);
   });
   const double b_norm = std::sqrt(r_r.total());
-  if (b_norm == 0.0) return 0;
+  const double tolerance = residual_norm >= 0.0 ? residual_norm : opt_.integrator.cg_tolerance * b_norm;
+  if (b_norm == 0.0 || b_norm <= tolerance) return 0;  // x = 0 is close enough
   double rz = r_z.total();
-  const double tolerance = opt_.integrator.cg_tolerance * b_norm;
   const int max_iterations = opt_.integrator.cg_max_iterations;
   for (int it = 1; it <= max_iterations; ++it) {
     const double alpha = rz / apply_step_operator(model_, opt_, state_, w.cg_p, w.cg_Ap);
@@ -394,7 +394,9 @@ int ImplicitEulerOperator::conjugate_gradient(const Points& b, Points& x) {
   return -1;
 }
 
-void ImplicitEulerOperator::solve(const Points& load, Points& out) { conjugate_gradient(load, out); }
+int ImplicitEulerOperator::solve(const Points& load, Points& out, double residual_norm) {
+  return conjugate_gradient(load, out, residual_norm);
+}
 
 void free_motion_implicit_euler(const Model& model, const Options& opt, State& state) {
   const double dt = opt.integrator.dt;

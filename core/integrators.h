@@ -49,9 +49,11 @@ class ImplicitEulerOperator final : public LinearResponse {
  public:
   ImplicitEulerOperator(const Model& model, const Options& opt, State& state);
   void apply(const Points& p, Points& Ap);
-  // Jacobi-preconditioned CG for A x = b; iterations used, -1 if not converged.
-  int conjugate_gradient(const Points& b, Points& x);
-  void solve(const Points& load, Points& out) override;
+  // Jacobi-preconditioned CG for A x = b from x = 0, until the residual over the free
+  // particles is at most residual_norm (N), or cg_tolerance |b| when residual_norm < 0;
+  // iterations used (0 when x = 0 is close enough), -1 if not converged.
+  int conjugate_gradient(const Points& b, Points& x, double residual_norm = -1.0);
+  int solve(const Points& load, Points& out, double residual_norm) override;
 
  private:
   const Model& model_;

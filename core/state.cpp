@@ -42,6 +42,10 @@ State make_state(const Model& model, const Options& opt) {
   w.active.reserve(m);
   w.members.reserve(m);
   use_threads(model, opt, s);
+  w.splitting.reserve(4 * m);
+  w.guess.reserve(m);
+  w.contact_response.resize(3, n);
+  w.compliance.slot.assign(n, -1);
   reset_health(model, opt, s);
   return s;
 }

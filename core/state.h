@@ -119,6 +119,30 @@ struct StepOutputs {
   std::vector<int> contact_candidate;  // particles with negative free gap or in contact before
   int contact_iterations = 0;          // pivots of the contact solve
   double contact_max_penetration = 0.0;  // m, after the solve (linearised)
+  // Implicit Euler's coupled contact (contact.h, docs/physics.md (2.17), (2.18)): the
+  // compliance columns computed this step, the splitting iterations of the two LCPs, and
+  // the CG solves and iterations all of it took.
+  int contact_columns = 0;
+  int contact_splitting_iterations = 0;
+  int contact_cg_solves = 0;
+  int contact_cg_iterations = 0;
+};
+
+// The compliance columns of implicit Euler's contact (contact.h; docs/physics.md (2.17)):
+// for cached particles i, j with unit directions n_i, n_j, dt^2 n_i . (A^-1)_ij n_j, the
+// body part of the Delassus operator W of (2.4). The one part of the Workspace read across
+// steps: an approximation of W that only the cost of the contact solve depends on (the
+// splitting (2.18) solves the LCP of each step's own A to the CG tolerance whatever it
+// holds), so a Checkpoint leaves it alone and a fresh State starts without it.
+struct ComplianceCache {
+  std::vector<int> particle;      // slot -> particle (-1: free slot)
+  std::vector<int> slot;          // n: particle -> slot (-1: not cached)
+  std::vector<int64_t> last_used;  // slot -> the solve that last had its particle as a candidate
+  Points direction;               // 3 x capacity: n_j, the unit force of each slot's column
+  std::vector<double> entry;      // capacity x capacity, row-major: the entries above, m
+  int capacity = 0;
+  int64_t solves = 0;             // coupled contact solves so far
+  double dt = 0.0, damping = 0.0;  // of the operator A the entries belong to
 };
 
 // Scratch memory owned by the state.
@@ -133,7 +157,8 @@ struct Workspace {
   // 3 x 3 per particle): the deformation gradient F_i (hex FEM: the element rotations)
   // and the law's second factor, S_i (St Venant-Kirchhoff, linear) or R_i (corotational).
   std::vector<double> tangent_F, tangent_S_or_R;
-  Points contact_response;             // 3 x (n * m): A^-1 J^T columns of the implicit contact compliance
+  Points contact_response;             // 3 x n: A^-1 J^T (nu - p), implicit Euler's contact response (contact.cpp)
+  ComplianceCache compliance;          // read across steps (see ComplianceCache)
   // Contact
   std::vector<int> candidate_slot;     // n, candidate slot of each particle, -1 if none
   std::vector<double> previous_multiplier;  // m, previous contact force along this step's normal
@@ -148,6 +173,8 @@ struct Workspace {
   // The threads of the force loops (Options' integrator.threads; use_threads()). Not copied
   // with the State: a copy makes its own pool at its first step.
   WorkerThreads threads;
+  std::vector<double> splitting;       // 4 m: implicit Euler's splitting iterates (contact.cpp)
+  std::vector<int> guess;              // m: the active set pivoting starts from
 };
 
 struct State : CarriedState {
