@@ -37,8 +37,7 @@ class Deadlines {
   // After the tick's work: `tick_start` from wait(). Advances the deadline.
   Outcome finish(int64_t tick_start);
 
-  int64_t period() const { return period_; }
-  int64_t deadline() const { return deadline_; }
+  int64_t deadline() const { return deadline_; }  // the current tick's, until finish()
 
  private:
   int64_t period_, margin_, watchdog_window_, watchdog_rest_;

@@ -12,6 +12,13 @@
 
 namespace palpate::server {
 
+bool saturate(Vec3& f, double max_force) {
+  const double length = f.norm();
+  if (!(max_force > 0.0 && length > max_force)) return false;
+  f *= max_force / length;
+  return true;
+}
+
 // docs/protocol.md (P.0).
 Vec3 render_at(const LocalModel& model, const Vec3& x, double max_force, bool* saturated) {
   Vec3 f = model.force;
@@ -21,11 +28,7 @@ Vec3 render_at(const LocalModel& model, const Vec3& x, double max_force, bool* s
     if (length > model.valid_radius) d *= model.valid_radius / length;
     f += model.stiffness * d;
   }
-  bool clipped = false;
-  if (max_force > 0.0 && f.norm() > max_force) {
-    f *= max_force / f.norm();
-    clipped = true;
-  }
+  const bool clipped = saturate(f, max_force);
   if (saturated != nullptr) *saturated = clipped;
   return f;
 }
@@ -35,6 +38,7 @@ RenderInput render_input_of(const Snapshot& step) {
   in.valid = true;
   in.render_model = step.render_model;
   in.render_force = step.render_force;
+  in.force_saturated = step.force_saturated;
   in.target = step.target;
   in.position_mode = step.position_mode;
   in.tick = step.tick;
@@ -58,10 +62,7 @@ HapticSample render_sample(const RenderInput& model, const DeviceInput& device, 
   } else {
     s.target = model.target;
     s.render_force = model.render_force;
-    if (max_force > 0.0 && s.render_force.norm() > max_force) {
-      s.render_force *= max_force / s.render_force.norm();
-      s.force_saturated = true;
-    }
+    s.force_saturated = model.force_saturated;
   }
   return s;
 }
@@ -125,7 +126,7 @@ void HapticRenderer::run() {
   int64_t tick = 0;
   while (!stop_.load(std::memory_order_relaxed)) {
     const int64_t start = deadlines.wait();
-    lateness_us_.add((start - (deadlines.deadline())) * 1e-3);
+    lateness_us_.add((start - deadlines.deadline()) * 1e-3);
     model_reader_.take();
     device_reader_.take();
     const RenderInput& model = model_reader_.front();

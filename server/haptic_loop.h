@@ -24,7 +24,8 @@ namespace palpate::server {
 struct RenderInput {
   bool valid = false;          // false: no step published yet
   LocalModel render_model;     // Snapshot::render_model
-  Vec3 render_force{0, 0, 0};  // the step's own render force (force mode renders it as it is)
+  Vec3 render_force{0, 0, 0};  // the step's own render force, saturated (force mode renders it as it is)
+  bool force_saturated = false;  // the step saturated it
   Vec3 target{0, 0, 0};        // the device position the step used, m
   bool position_mode = false;
   int64_t tick = 0;            // the step's tick
@@ -54,6 +55,9 @@ struct HapticSample {
   uint64_t haptic_misses = 0;      // render ticks missed so far
 };
 
+// Scales f to max_force (> 0; 0 = no limit) when it is longer; true if it did.
+bool saturate(Vec3& f, double max_force);
+
 // The force for the device at x from a local model, docs/protocol.md (P.0):
 // F(x) = F0 + K (x - x0) with x - x0 clipped to the valid radius (radius 0 or no stiffness
 // yet: F0), then saturated at max_force (> 0; 0 = no limit) by scaling. `saturated`
@@ -63,8 +67,8 @@ Vec3 render_at(const LocalModel& model, const Vec3& x, double max_force, bool* s
 // One render tick without the thread: the sample for the newest step and device input
 // (the renderer's tick; the multirate verification, palpate-bench-multirate, calls it
 // directly). Position mode renders the step's render model at the device position
-// (the step's own target before any setPosition reached the renderer); force mode the
-// step's render force.
+// (the step's own target before any setPosition reached the renderer), saturated at
+// max_force; force mode the step's render force (already saturated by the step).
 HapticSample render_sample(const RenderInput& model, const DeviceInput& device, double max_force);
 
 struct HapticCounters {

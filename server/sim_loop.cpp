@@ -472,11 +472,7 @@ void Simulation::publish() {
   // Position mode: the device feels the coupling's reaction, -(its force on the tool);
   // force mode: the contact force, as if the device held the tool rigidly.
   s.render_force = position_mode_ ? Vec3(-state.out.coupling_force) : state.indenter_contact_force;
-  s.force_saturated = false;
-  if (const double limit = config_.device.max_force; limit > 0.0 && s.render_force.norm() > limit) {
-    s.render_force *= limit / s.render_force.norm();
-    s.force_saturated = true;
-  }
+  s.force_saturated = saturate(s.render_force, config_.device.max_force);
   fill_local_models(s);
   s.indentation = indentation(model, state);
   s.command_seq = applied_seq_;

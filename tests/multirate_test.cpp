@@ -82,8 +82,10 @@ TEST(RenderSample, RendersANewerDevicePositionAndOnlyANewerOne) {
   EXPECT_TRUE(older.render_force.isApprox(in.render_force));
   EXPECT_EQ(older.command_seq, 10u);
   in.position_mode = false;  // force mode: the step's force, whatever the device did
+  in.force_saturated = true;  // the step clipped it: rendered as it is, and said so
   HapticSample force_mode = render_sample(in, {moved, 11}, 0.0);
   EXPECT_TRUE(force_mode.render_force.isApprox(in.render_force));
+  EXPECT_TRUE(force_mode.force_saturated);
 }
 
 TEST(HapticRenderer, RendersTheNewestModelAtTheNewestDevicePosition) {
