@@ -81,8 +81,7 @@ Simulation::Simulation(SimConfig config, Scene scene) : config_(std::move(config
 void Simulation::start() {
   wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
   if (wake_fd_ < 0) throw std::runtime_error(std::string("eventfd: ") + std::strerror(errno));
-  commands_.reserve(64);
-  drained_.reserve(64);
+  command_ring_.resize(kMaxQueuedCommands);
   thread_ = std::thread([this] { run(); });
 }
 
@@ -107,9 +106,12 @@ void Simulation::stop() {
 
 uint64_t Simulation::enqueue(CommandType type, const Vec3& value) {
   std::lock_guard<std::mutex> lock(command_mutex_);
-  if (commands_.size() >= kMaxQueuedCommands) return 0;  // refused: nothing queued, no number used
+  const uint64_t written = commands_written_.load(std::memory_order_relaxed);
+  if (written - commands_read_.load(std::memory_order_acquire) >= kMaxQueuedCommands)
+    return 0;  // refused: nothing queued, no number used
   const uint64_t seq = next_seq_++;
-  commands_.push_back({type, value, seq});
+  command_ring_[written % kMaxQueuedCommands] = {type, value, seq};
+  commands_written_.store(written + 1, std::memory_order_release);
   if (type == CommandType::set_position && haptic_) haptic_->offer_device(value, seq);  // rendered at once
   return seq;
 }
@@ -331,15 +333,11 @@ void Simulation::configure_workers(bool realtime) {
 bool Simulation::tick_once() {
   const Model& model = *model_;
   State& state = *state_;
-  {
-    // Real time never waits for the RPC thread: if it holds the queue right now,
-    // the commands are applied next tick. Headless always drains (determinism).
-    std::unique_lock<std::mutex> lock(command_mutex_, std::defer_lock);
-    if (config_.headless) lock.lock();
-    else (void)lock.try_lock();
-    if (lock.owns_lock()) drained_.swap(commands_);  // both keep their capacity
-  }
-  for (const Command& c : drained_) {
+  // Every command published so far, without a lock (see command_ring_ in sim_loop.h).
+  const uint64_t published = commands_written_.load(std::memory_order_acquire);
+  const uint64_t first_unread = commands_read_.load(std::memory_order_relaxed);
+  for (uint64_t k = first_unread; k != published; ++k) {
+    const Command& c = command_ring_[k % kMaxQueuedCommands];
     switch (c.type) {
       case CommandType::set_force:
         state.force_command = c.value;
@@ -370,8 +368,8 @@ bool Simulation::tick_once() {
     }
     applied_seq_ = c.seq;
   }
-  const bool had_commands = !drained_.empty();
-  drained_.clear();
+  commands_read_.store(published, std::memory_order_release);  // frees the slots for enqueue()
+  const bool had_commands = published != first_unread;
   paused_flag_.store(paused_, std::memory_order_relaxed);
   status_force_.store(pressing_force(state), std::memory_order_relaxed);
   status_position_mode_.store(position_mode_, std::memory_order_relaxed);

@@ -229,7 +229,6 @@ class Simulation {
   double divergence_bound_ = 0.0;  // m, see diverged() in sim_loop.cpp
   std::unique_ptr<Checkpoint> rest_, checkpoint_;
   SnapshotBuffer::Writer frames_writer_;
-  std::vector<Command> drained_;
   bool paused_ = false;
   uint64_t applied_seq_ = 0;
   int64_t ticks_since_recovery_ = -1;  // -1: never recovered
@@ -245,10 +244,17 @@ class Simulation {
   std::atomic<bool> stop_{false};
   std::atomic<bool> want_positions_{false}, want_contacts_{false}, want_derived_{false};
 
-  // Any thread, under command_mutex_.
+  // The command queue: a bounded ring with one consumer, the sim thread. Producers
+  // serialise on command_mutex_ and publish an entry by advancing commands_written_
+  // (release); the sim thread takes every published entry without a lock (acquire)
+  // and frees the slots by advancing commands_read_. A producer descheduled while it
+  // holds the mutex therefore never delays a command already queued, and a command
+  // is applied at the latest two ticks after the tick its enqueue() returned at.
   std::mutex command_mutex_;
-  std::vector<Command> commands_;
-  uint64_t next_seq_ = 1;
+  uint64_t next_seq_ = 1;                  // under command_mutex_
+  std::vector<Command> command_ring_;      // kMaxQueuedCommands entries, sized once
+  std::atomic<uint64_t> commands_written_{0};
+  std::atomic<uint64_t> commands_read_{0};
 
   // Any thread, under job_mutex_ (job_done_: atomic).
   std::mutex job_mutex_;

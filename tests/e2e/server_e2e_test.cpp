@@ -53,11 +53,13 @@ using palpate::test::run_program;
 // have to show a live loop, and leaks are LeakSanitizer's job, not the RSS check's.
 #ifdef PALPATE_SANITIZED
 constexpr double kMinRateHz = 200.0;          // real-time loop at 1 kHz, measured rate
-constexpr size_t kMinFullRateFrames = 250;    // frames of a full-rate subscriber over 1.5 s
+constexpr int64_t kMinTicksStepped = 250;     // ticks a full-rate subscriber's frames span over 1.5 s
+constexpr int64_t kMaxFrameGapTicks = 200;    // the longest run of ticks without a frame
 constexpr long kMaxRssGrowthKb = 1L << 30;    // not checked
 #else
 constexpr double kMinRateHz = 950.0;
-constexpr size_t kMinFullRateFrames = 1200;
+constexpr int64_t kMinTicksStepped = 1000;
+constexpr int64_t kMaxFrameGapTicks = 50;
 constexpr long kMaxRssGrowthKb = 4096;
 #endif
 
@@ -131,6 +133,23 @@ class RecordingSink final : public FrameSink::Server {
     return kj::READY_NOW;
   }
 };
+
+// What a full-rate subscriber must have seen over a window, counted in the loop's own
+// ticks rather than in wall-clock time: frames spanning the ticks a live loop steps,
+// at least one frame for every two ticks, and no long gap. A neighbour that blocked the
+// RPC thread or the loop shows as a gap of hundreds of ticks; the RPC thread losing a
+// time slice on a loaded two-core machine coalesces a few frames (the newest wins, by
+// design) and is not a failure.
+void expect_full_rate_delivery(const std::vector<FrameRecord>& frames, const char* who) {
+  ASSERT_GE(frames.size(), 2u) << who << ": no stream";
+  const int64_t span = frames.back().tick - frames.front().tick + 1;
+  int64_t largest_gap = 0;
+  for (size_t k = 1; k < frames.size(); ++k) largest_gap = std::max(largest_gap, frames[k].tick - frames[k - 1].tick);
+  EXPECT_GE(span, kMinTicksStepped) << who << ": the loop stepped too few ticks";
+  EXPECT_GE(static_cast<int64_t>(frames.size()) * 2, span)
+      << who << " got " << frames.size() << " frames over " << span << " ticks";
+  EXPECT_LE(largest_gap, kMaxFrameGapTicks) << who << " went " << largest_gap << " ticks without a frame";
+}
 
 using palpate::test::open_session;
 
@@ -707,7 +726,7 @@ TEST(ServerE2E, StalledAndVanishingClientsCostOthersNothing) {
   const double rate = achieved_rate(c, session);
   stalled.release();
   EXPECT_GT(rate, kMinRateHz);
-  EXPECT_GT(sink.frames.size(), kMinFullRateFrames) << "the full-rate subscriber lost frames to a stalled neighbour";
+  expect_full_rate_delivery(sink.frames, "the full-rate subscriber beside a stalled neighbour");
   EXPECT_TRUE(g_server->alive());
 }
 
@@ -1542,7 +1561,7 @@ TEST(ServerWebSocket, ANeverReadingClientCostsOthersNothing) {
   const double rate = c.achieved_rate();
   stalled.release();
   EXPECT_GT(rate, kMinRateHz);
-  EXPECT_GT(c.sink->frames.size(), kMinFullRateFrames) << "a WebSocket subscriber lost frames to a stalled neighbour";
+  expect_full_rate_delivery(c.sink->frames, "a WebSocket subscriber beside a stalled neighbour");
   EXPECT_TRUE(g_server->alive());
 }
 
