@@ -2,6 +2,8 @@
 
 #include "core/integrators.h"
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <cmath>
 #include <optional>
@@ -38,15 +40,109 @@ bool cholesky_solve(int k, double* L, double* b) {
   return true;
 }
 
-int projected_gauss_seidel(int m, const double* W, const double* g, double* lambda, double tolerance,
-                           int max_sweeps) {
+// The operator of a principal pivoting solve (principal_pivoting below). Two of them: the
+// dense W of implicit Euler's splitting and of the analysis, and the explicit integrators'
+// W = D + U U^T of (2.4), solved through (2.19) at O(m) a pivot. Each provides
+//   solve_active(k, members, b): b := W_AA^-1 b (A = members[0..k)), false if W_AA is not SPD;
+//     the solution becomes the operator's current lambda_A (for coupling());
+//   coupling(a): (W_aA lambda_A) for a candidate a outside A;
+//   diagonal(a), start(lambda), row_product(a, lambda) = (W lambda)_a, moved(a, delta) for
+//     projected Gauss-Seidel, which changes lambda one entry at a time.
+class DenseDelassus {
+ public:
+  DenseDelassus(int m, const double* W, Workspace& work) : m_(m), W_(W) {
+    if (work.solve_buffer.size() < static_cast<size_t>(m) * m) work.solve_buffer.resize(static_cast<size_t>(m) * m);
+    L_ = work.solve_buffer.data();
+  }
+  bool solve_active(int k, const int* members, double* b) {
+    for (int r = 0; r < k; ++r)
+      for (int c = 0; c <= r; ++c) L_[r * k + c] = W_[members[r] * m_ + members[c]];
+    members_ = members;
+    k_ = k;
+    lambda_ = b;
+    return k == 0 || cholesky_solve(k, L_, b);
+  }
+  double coupling(int a) const {
+    double w = 0.0;
+    for (int r = 0; r < k_; ++r) w += W_[a * m_ + members_[r]] * lambda_[r];
+    return w;
+  }
+  double diagonal(int a) const { return W_[a * m_ + a]; }
+  void start(const double*, int) {}
+  double row_product(int a, const double* lambda) const {
+    double w = 0.0;
+    for (int b = 0; b < m_; ++b) w += W_[a * m_ + b] * lambda[b];
+    return w;
+  }
+  void moved(int, double) {}
+
+ private:
+  int m_;
+  const double* W_;
+  double* L_ = nullptr;
+  const int* members_ = nullptr;
+  const double* lambda_ = nullptr;
+  int k_ = 0;
+};
+
+// W = D + U U^T (2.4) with D = diag(d) > 0 and U of three columns (u: row a at u + 3a).
+// W_AA^-1 b by the Woodbury identity (2.19): y = D_A^-1 b, G = I + U_A^T D_A^-1 U_A (3 x 3),
+// W_AA^-1 b = y - D_A^-1 U_A G^-1 U_A^T y.
+class LumpedDelassus {
+ public:
+  LumpedDelassus(const double* d, const double* u) : d_(d), u_(u) {}
+  bool solve_active(int k, const int* members, double* b) {
+    Eigen::Matrix3d G = Eigen::Matrix3d::Identity();
+    Vec3 t = Vec3::Zero();
+    for (int r = 0; r < k; ++r) {
+      const int a = members[r];
+      const Vec3 u = row(a);
+      b[r] /= d_[a];
+      G.selfadjointView<Eigen::Lower>().rankUpdate(u, 1.0 / d_[a]);
+      t += u * b[r];
+    }
+    const Eigen::LLT<Eigen::Matrix3d> llt(G);  // reads the lower triangle
+    if (llt.info() != Eigen::Success) return false;
+    const Vec3 z = llt.solve(t);
+    s_.setZero();  // U_A^T lambda_A, for coupling()
+    for (int r = 0; r < k; ++r) {
+      const int a = members[r];
+      const Vec3 u = row(a);
+      b[r] -= u.dot(z) / d_[a];
+      s_ += u * b[r];
+    }
+    return true;
+  }
+  double coupling(int a) const { return row(a).dot(s_); }
+  double diagonal(int a) const { return d_[a] + row(a).squaredNorm(); }
+  void start(const double* lambda, int m) {
+    s_.setZero();
+    for (int a = 0; a < m; ++a) s_ += row(a) * lambda[a];
+  }
+  double row_product(int a, const double* lambda) const { return d_[a] * lambda[a] + row(a).dot(s_); }
+  void moved(int a, double delta) { s_ += row(a) * delta; }
+  // out = W x over m candidates.
+  void apply(int m, const double* x, double* out) {
+    start(x, m);
+    for (int a = 0; a < m; ++a) out[a] = row_product(a, x);
+  }
+
+ private:
+  Vec3 row(int a) const { return Vec3(u_[3 * a], u_[3 * a + 1], u_[3 * a + 2]); }
+  const double* d_;
+  const double* u_;
+  Vec3 s_ = Vec3::Zero();
+};
+
+template <class Op>
+int projected_gauss_seidel(int m, Op& W, const double* g, double* lambda, double tolerance, int max_sweeps) {
   for (int sweep = 1; sweep <= max_sweeps; ++sweep) {
     double worst = 0;
     for (int a = 0; a < m; ++a) {
-      double w = g[a];
-      for (int b = 0; b < m; ++b) w += W[a * m + b] * lambda[b];
-      const double updated = std::max(0.0, lambda[a] - w / W[a * m + a]);
+      const double w = g[a] + W.row_product(a, lambda);
+      const double updated = std::max(0.0, lambda[a] - w / W.diagonal(a));
       if (updated > 0 || w < 0) worst = std::max(worst, std::abs(w));
+      W.moved(a, updated - lambda[a]);
       lambda[a] = updated;
     }
     if (worst <= tolerance) return sweep;
@@ -54,18 +150,16 @@ int projected_gauss_seidel(int m, const double* W, const double* g, double* lamb
   return -1;
 }
 
-}  // namespace
-
-int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda, double tolerance,
-                        int max_iterations, Workspace& work, const int* initial_active) {
-  // Principal pivoting: guess the active set ({g < 0} unless given), solve W_AA lambda_A = -g_A,
-  // drop the most negative multiplier or add the most violated gap, repeat.
+// Principal pivoting (docs/physics.md §2, "The LCP solver"): guess the active set
+// ({g < 0} unless given), solve W_AA lambda_A = -g_A, drop the most negative multiplier or
+// add the most violated gap, repeat; projected Gauss-Seidel finishes if it does not settle.
+template <class Op>
+int principal_pivoting(int m, Op& W, const double* g, double* lambda, double tolerance, int max_iterations,
+                       Workspace& work, const int* initial_active) {
   std::vector<int>& active = work.active;
-  std::vector<double>& buf = work.solve_buffer;
   active.assign(m, 0);
-  if (buf.size() < static_cast<size_t>(m * m + m)) buf.resize(static_cast<size_t>(m * m + m));
-  double* L = buf.data();
-  double* rhs = L + m * m;
+  if (work.pivot_rhs.size() < static_cast<size_t>(m)) work.pivot_rhs.resize(m);
+  double* rhs = work.pivot_rhs.data();
   work.members.resize(m);
   int* members = work.members.data();
   for (int a = 0; a < m; ++a) active[a] = initial_active ? initial_active[a] != 0 : g[a] < 0;
@@ -73,12 +167,9 @@ int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda,
     int k = 0;
     for (int a = 0; a < m; ++a)
       if (active[a]) members[k++] = a;
-    for (int r = 0; r < k; ++r) {
-      for (int c = 0; c <= r; ++c) L[r * k + c] = W[members[r] * m + members[c]];
-      rhs[r] = -g[members[r]];
-    }
+    for (int r = 0; r < k; ++r) rhs[r] = -g[members[r]];
     std::fill(lambda, lambda + m, 0.0);
-    if (k > 0 && !cholesky_solve(k, L, rhs)) break;
+    if (!W.solve_active(k, members, rhs)) break;
     int drop = -1;
     double most_negative = 0;
     for (int r = 0; r < k; ++r) {
@@ -96,8 +187,7 @@ int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda,
     double most_violated = -tolerance;
     for (int a = 0; a < m; ++a) {
       if (active[a]) continue;
-      double w = g[a];
-      for (int r = 0; r < k; ++r) w += W[a * m + members[r]] * lambda[members[r]];
+      const double w = g[a] + W.coupling(a);
       if (w < most_violated) {
         most_violated = w;
         add = a;
@@ -108,8 +198,23 @@ int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda,
   }
   // Pivoting did not settle: finish with projected Gauss-Seidel from the clipped iterate.
   for (int a = 0; a < m; ++a) lambda[a] = std::max(0.0, lambda[a]);
+  W.start(lambda, m);
   const int sweeps = projected_gauss_seidel(m, W, g, lambda, tolerance, 100 * max_iterations);
   return sweeps < 0 ? -1 : max_iterations + sweeps;
+}
+
+}  // namespace
+
+int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda, double tolerance,
+                        int max_iterations, Workspace& work, const int* initial_active) {
+  DenseDelassus op(m, W, work);
+  return principal_pivoting(m, op, g, lambda, tolerance, max_iterations, work, initial_active);
+}
+
+int solve_signorini_lcp_lumped(int m, const double* d, const double* u, const double* g, double* lambda,
+                               double tolerance, int max_iterations, Workspace& work, const int* initial_active) {
+  LumpedDelassus op(d, u);
+  return principal_pivoting(m, op, g, lambda, tolerance, max_iterations, work, initial_active);
 }
 
 namespace {
@@ -356,23 +461,31 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   // Delassus operator W = dt^2 J M^-1 J^T, the sphere's translations included:
   // W_ab = dt^2 [ n_a . (response of particle a to a unit force n_b on b) + n_a . P n_b / M ],
   // P = diag(tool_axes): the axes the tool moves along (a guided axis has infinite mass) (2.4).
-  // For implicit Euler, the body's response is A^-1: W~ of (2.17) here, the exact W in the splitting.
+  // Explicit integrators: W = D + U U^T, D_aa = dt^2 / m_a, U_a = dt (P / M)^1/2 n_a, never
+  // formed (LumpedDelassus). Implicit Euler: the body's response is A^-1, W~ of (2.17) in
+  // work.delassus, the exact W in the splitting.
   const double dt2 = dt * dt;
   const double inv_sphere_mass = 1.0 / tool_effective_mass(opt);  // with a coupling: implicit in it
   const Vec3 axes = tool_axes(opt);
-  work.delassus.resize(static_cast<size_t>(m) * m);
-  double* W = work.delassus.data();
   std::optional<CoupledContact> implicit;
+  std::optional<LumpedDelassus> lumped;
   if (coupled) {
+    work.delassus.resize(static_cast<size_t>(m) * m);
     implicit.emplace(model, opt, state, *coupled);
     implicit->load_columns(false, std::max(kColumnTolerance, opt.integrator.cg_tolerance));
   } else {
-    for (int a = 0; a < m; ++a)
-      for (int b = 0; b < m; ++b) W[a * m + b] = (a == b) ? dt2 * model.inverse_mass[candidate[a]] : 0.0;
-    for (int a = 0; a < m; ++a)
-      for (int b = 0; b < m; ++b)
-        W[a * m + b] += dt2 * inv_sphere_mass * work.normal.col(a).dot(axes.cwiseProduct(work.normal.col(b)));
+    work.delassus_diagonal.resize(m);
+    work.delassus_factor.resize(3 * static_cast<size_t>(m));
+    const Vec3 scale = dt * (inv_sphere_mass * axes).cwiseSqrt();
+    for (int a = 0; a < m; ++a) {
+      work.delassus_diagonal[a] = dt2 * model.inverse_mass[candidate[a]];
+      const Vec3 u = scale.cwiseProduct(work.normal.col(a));
+      for (int j = 0; j < 3; ++j) work.delassus_factor[3 * a + j] = u[j];
+    }
+    lumped.emplace(work.delassus_diagonal.data(), work.delassus_factor.data());
   }
+  // out = W x (the explicit integrators' W; implicit Euler's gaps come from its residual).
+  auto times_W = [&](const double* x, double* out) { lumped->apply(m, x, out); };
 
   // Replaces the previous contact forces (held over the free motion) by `total`:
   // particles += gain M^-1 (total_a n_a - f_prev,a) (implicit Euler: gain A^-1 J^T (total - p),
@@ -393,10 +506,16 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   };
   // The LCPs are posed in the total multipliers: g' = (g - W p) + W lambda, p the previous ones.
   const double* previous = work.previous_multiplier.data();
+  work.delassus_product.resize(m);
+  double* W_times = work.delassus_product.data();
   auto shift_by_previous = [&](double* g) {
-    for (int a = 0; a < m; ++a)
-      for (int b = 0; b < m; ++b) g[a] -= W[a * m + b] * previous[b];
+    times_W(previous, W_times);
+    for (int a = 0; a < m; ++a) g[a] -= W_times[a];
   };
+  // Pivoting starts from the previous step's contact set and the particles that penetrate
+  // (in a running simulation the set changes by a few particles a step).
+  if (work.guess.size() < static_cast<size_t>(m)) work.guess.resize(m);
+  int* guess = work.guess.data();
 
   // 1. Position projection.
   work.multiplier.resize(m);
@@ -412,20 +531,20 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
     std::copy(w, w + m, work.gap.begin());
   } else {
     shift_by_previous(work.gap.data());
-    iterations = solve_signorini_lcp(m, W, work.gap.data(), lambda, tolerance, max_iterations, work);
+    for (int a = 0; a < m; ++a) guess[a] = previous[a] > 0.0 || work.gap[a] < 0.0;
+    iterations = solve_signorini_lcp_lumped(m, work.delassus_diagonal.data(), work.delassus_factor.data(), work.gap.data(), lambda,
+                                            tolerance, max_iterations, work, guess);
   }
   bool converged = iterations >= 0;
   state.out.contact_iterations = std::max(iterations, 0);
   apply(lambda, dt2, state.position, state.indenter_center);
 
   // Gaps after the projection: who is touching, and the penetration left.
-  for (int a = 0; a < m; ++a) {
-    double w = work.gap[a];
-    if (!coupled)
-      for (int b = 0; b < m; ++b) w += W[a * m + b] * lambda[b];
-    work.gap[a] = w;
-    state.out.contact_max_penetration = std::max(state.out.contact_max_penetration, -w);
+  if (!coupled) {
+    times_W(lambda, W_times);
+    for (int a = 0; a < m; ++a) work.gap[a] += W_times[a];
   }
+  for (int a = 0; a < m; ++a) state.out.contact_max_penetration = std::max(state.out.contact_max_penetration, -work.gap[a]);
 
   // 2. Velocity projection on the touching particles; the others are given an
   // infinite separating velocity so that the LCP leaves them at zero force.
@@ -444,7 +563,9 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
     iterations = implicit->solve(work.gap.data(), mu, w);
   } else {
     shift_by_previous(work.gap.data());
-    iterations = solve_signorini_lcp(m, W, work.gap.data(), mu, tolerance, max_iterations, work);
+    for (int a = 0; a < m; ++a) guess[a] = mu[a] > 0.0;  // the position projection's set
+    iterations = solve_signorini_lcp_lumped(m, work.delassus_diagonal.data(), work.delassus_factor.data(), work.gap.data(), mu,
+                                            tolerance, max_iterations, work, guess);
   }
   converged = converged && iterations >= 0;
   state.out.contact_iterations += std::max(iterations, 0);

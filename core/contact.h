@@ -8,8 +8,9 @@
 //    motion: g' = g + W lambda, W = dt^2 J M^-1 J^T with the sphere's column
 //    included (the Delassus operator). The linear complementarity problem
 //    lambda >= 0, g' >= 0, lambda . g' = 0 (Signorini) is solved exactly by
-//    principal pivoting on the small dense W (projected Gauss-Seidel finishes if
-//    pivoting does not settle); x += dt^2 M^-1 J^T lambda.
+//    principal pivoting from the previous step's contact set (projected Gauss-Seidel
+//    finishes if pivoting does not settle), on W = D + U U^T by the Woodbury identity
+//    (2.19), O(m) a pivot; x += dt^2 M^-1 J^T lambda.
 // 2. Velocities. For the particles touching after (1), the relative normal
 //    velocities u = J v must not approach: u' = u + (W / dt) mu >= 0, mu >= 0,
 //    mu . u' = 0; v += dt M^-1 J^T mu. mu (N) is the contact force of the step
@@ -48,5 +49,12 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
 // used, or -1 when it did not converge. Scratch comes from `work`.
 int solve_signorini_lcp(int m, const double* W, const double* g, double* lambda, double tolerance,
                         int max_iterations, Workspace& work, const int* initial_active = nullptr);
+
+// The same LCP and pivoting for W = diag(d) + U U^T, d > 0 (m), U m x 3 (row a at u + 3a),
+// the explicit integrators' Delassus operator (2.4): each pivot solves W_AA by the
+// Woodbury identity (2.19), O(m) instead of the dense O(k^3) factorisation.
+int solve_signorini_lcp_lumped(int m, const double* d, const double* u, const double* g, double* lambda,
+                               double tolerance, int max_iterations, Workspace& work,
+                               const int* initial_active = nullptr);
 
 }  // namespace palpate

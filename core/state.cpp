@@ -34,16 +34,19 @@ State make_state(const Model& model, const Options& opt) {
   w.candidate_slot.assign(n, -1);
   w.previous_multiplier.reserve(n);
   w.previous_force.resize(3, n);
-  // Room for a few dozen contacts without reallocation in the loop.
+  // Per-candidate vectors: room for every particle, never reallocated in the loop. The
+  // dense m x m ones (implicit Euler's W~ and its factor): room for a few dozen contacts.
+  const size_t all = static_cast<size_t>(n);
+  for (std::vector<double>* v : {&w.multiplier, &w.delassus_diagonal, &w.delassus_product, &w.pivot_rhs}) v->reserve(all);
+  w.delassus_factor.reserve(3 * all);
+  w.active.reserve(all);
+  w.members.reserve(all);
+  w.guess.reserve(all);
+  w.splitting.reserve(4 * all);
   const size_t m = 64;
   w.delassus.reserve(m * m);
-  w.multiplier.reserve(m);
-  w.solve_buffer.reserve(m * m + m);
-  w.active.reserve(m);
-  w.members.reserve(m);
+  w.solve_buffer.reserve(m * m);
   use_threads(model, opt, s);
-  w.splitting.reserve(4 * m);
-  w.guess.reserve(m);
   w.contact_response.resize(3, n);
   w.compliance.slot.assign(n, -1);
   reset_health(model, opt, s);

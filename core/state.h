@@ -165,7 +165,11 @@ struct Workspace {
   Points previous_force;               // 3 x n capacity, previous contact force vectors
   std::vector<double> gap;             // free gaps, m
   Points normal;                       // 3 x n capacity, unit normals from the sphere centre
-  std::vector<double> delassus;        // m x m, row-major
+  std::vector<double> delassus;        // m x m, row-major: implicit Euler's W~ (2.17)
+  std::vector<double> delassus_diagonal;  // m: D of the explicit integrators' W = D + U U^T (2.4)
+  std::vector<double> delassus_factor;    // 3 m: U, row a at 3a
+  std::vector<double> delassus_product;   // m: W x
+  std::vector<double> pivot_rhs;          // m: the active set's right-hand side, then its multipliers
   std::vector<double> multiplier;      // m
   std::vector<double> solve_buffer;    // scratch of the active-set solve
   std::vector<int> active;             // active-set membership (0/1 per candidate)

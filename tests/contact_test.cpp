@@ -41,6 +41,52 @@ TEST(SignoriniLcp, SolutionIsComplementaryOnRandomSpdProblems) {
   }
 }
 
+// The explicit integrators' operator W = D + U U^T (2.4), solved through (2.19): on problems of
+// a contact's shape (up to 200 candidates, a tool free along some axes only, stiff and
+// soft particles), the solution is the unique one of the LCP with W formed densely (W is
+// SPD), whatever active set pivoting starts from.
+TEST(SignoriniLcp, LumpedOperatorGivesTheDenseSolutionFromAnyStart) {
+  std::mt19937 rng(2);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  Workspace work;
+  const Vec3 axes_of_trial[3] = {Vec3(1, 1, 1), Vec3(0, 0, 1), Vec3(0, 0, 0)};
+  int largest_pivots = 0;
+  for (int trial = 0; trial < 30; ++trial) {
+    const int m = 1 + (trial * 37) % 200;
+    const Vec3 axes = axes_of_trial[trial % 3];
+    const double dt = 1e-3, tool_mass = 0.05 + uniform(rng);
+    Eigen::VectorXd d(m), g(m);
+    Eigen::MatrixXd U(m, 3);
+    for (int a = 0; a < m; ++a) {
+      d[a] = dt * dt / (1e-5 * (1.0 + 100.0 * uniform(rng)));  // particle masses over two decades
+      const Vec3 n = Vec3(normal(rng), normal(rng), normal(rng)).normalized();
+      U.row(a) = (dt * (axes / tool_mass).cwiseSqrt()).cwiseProduct(n).transpose();
+      g[a] = 1e-4 * normal(rng);
+    }
+    const Eigen::MatrixXd W = Eigen::MatrixXd(d.asDiagonal()) + U * U.transpose();
+    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> U_rows = U;
+    Eigen::VectorXd dense(m), lumped(m);
+    ASSERT_GT(solve_signorini_lcp(m, W.data(), g.data(), dense.data(), 1e-14, 1000, work), 0) << "trial " << trial;
+    std::vector<int> start(m);
+    for (int guess = 0; guess < 3; ++guess) {
+      for (int a = 0; a < m; ++a) start[a] = guess == 0 ? 0 : guess == 1 ? 1 : uniform(rng) < 0.5;
+      const int pivots = solve_signorini_lcp_lumped(m, d.data(), U_rows.data(), g.data(), lumped.data(), 1e-14, 1000,
+                                                    work, start.data());
+      ASSERT_GT(pivots, 0) << "trial " << trial << " start " << guess;
+      largest_pivots = std::max(largest_pivots, pivots);
+      const Eigen::VectorXd w = g + W * lumped;
+      for (int a = 0; a < m; ++a) {
+        EXPECT_GE(lumped[a], 0.0);
+        EXPECT_GE(w[a], -1e-13) << "trial " << trial << " candidate " << a;
+        EXPECT_LT(std::abs(lumped[a] * w[a]), 1e-13 * std::max(1.0, lumped[a]));
+      }
+      EXPECT_LT((lumped - dense).norm(), 1e-9 * std::max(1.0, dense.norm())) << "trial " << trial << " start " << guess;
+    }
+  }
+  EXPECT_LE(largest_pivots, 1000);  // pivoting settled every time (PGS would add 1000)
+}
+
 std::string pressed_block(const std::string& integrator, double dt, const std::string& model = "mls") {
   return R"({"model": ")" + model + R"(", "body": {"box": {"min": [-0.5,-0.5,-1], "max": [0.5,0.5,0]},
                       "distribution": {"type": "grid", "per_edge": 8}},
