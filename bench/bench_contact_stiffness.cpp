@@ -43,7 +43,8 @@ its own dt under a slowly varying command; prints medians.
   --amplitude N       amplitude of the command's variation about --force (default 5)
   --period SECONDS    its period (default 0.5)
   --ticks N           steps timed (default 200)
-  --tolerance X       relative residual of the projected CG (default 1e-6)
+  --tolerance X       relative residual of the projected CG (default: the server's,
+                      kRenderingStiffness, 1e-3)
   --max-iterations N  per solve (default 2000)
   --json              print one JSON object instead of the table
 Exit status: 0, 1 on a scene that does not load or a press that fails, 2 on a wrong argument.
@@ -75,7 +76,7 @@ int main(int argc, char** argv) {
   SceneOverrides overrides;
   double force = 100.0, amplitude = 5.0, period = 0.5;
   int ticks = 200;
-  ContactStiffnessSettings settings;
+  ContactStiffnessSettings settings = kRenderingStiffness;
   bool json_out = false;
   try {
     for (cli::Arguments args(argc, argv); args.next();) {
@@ -145,6 +146,14 @@ int main(int argc, char** argv) {
     limited_by_entering += last.limited_by == LocalContactModel::Limit::entering;
     limited_by_leaving += last.limited_by == LocalContactModel::Limit::leaving;
   }
+  // The last tick's warm-started K against a solve of the same state to 1e-10, the truth the
+  // tolerance is judged by (tests/contact_stiffness_test.cpp checks that one against finite differences).
+  ContactStiffness tight(model, {1e-10, 20000});
+  const LocalContactModel truth = tight.evaluate(model, state);
+  const double K_scale = truth.stiffness.cwiseAbs().maxCoeff();
+  const double K_error = K_scale > 0 ? (last.stiffness - truth.stiffness).cwiseAbs().maxCoeff() / K_scale : 0.0;
+  const double radius_error =
+      truth.valid_radius > 0 ? std::abs(last.valid_radius - truth.valid_radius) / truth.valid_radius : 0.0;
   const Stats warm = stats(warm_ms), cold_s = stats(cold_ms), stp = stats(step_ms), wi = stats(warm_it),
               ci = stats(cold_it), rad = stats(radius), act = stats(active);
   nlohmann::json j;
@@ -172,6 +181,8 @@ int main(int argc, char** argv) {
   j["active"] = to_json(act);
   j["limited_by_entering"] = limited_by_entering;
   j["limited_by_leaving"] = limited_by_leaving;
+  j["stiffness_error"] = K_error;
+  j["valid_radius_error"] = radius_error;
   j["not_converged"] = not_converged;
   j["failed_steps"] = bad_steps;
   if (json_out) {
@@ -195,6 +206,8 @@ int main(int argc, char** argv) {
               rad.median, rad.min, rad.p10, rad.p90, rad.max, act.median, act.p90, act.max);
   std::printf("  %-28s entering %d, leaving %d of %d ticks\n", "radius limited by", limited_by_entering,
               limited_by_leaving, ticks);
+  std::printf("  %-28s %.2e of its largest entry; valid radius %.2e (relative)\n", "K against a 1e-10 solve", K_error,
+              radius_error);
   if (not_converged || bad_steps)
     std::printf("warning: %d evaluations did not converge, %d steps were not ok\n", not_converged, bad_steps);
   return 0;

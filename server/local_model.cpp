@@ -14,7 +14,7 @@
 namespace palpate::server {
 
 StiffnessSource::StiffnessSource(const Model& model, bool worker_thread)
-    : model_(model), threaded_(worker_thread), stiffness_(model) {
+    : model_(model), threaded_(worker_thread), stiffness_(model, kRenderingStiffness) {
   newest_.tick = -1;
   if (threaded_) {
     input_ = make_state(model, Options{});  // sized once: later copies reuse the storage

@@ -348,6 +348,30 @@ TEST(ContactStiffness, WarmStartsAndNoAllocationAfterTheFirstCall) {
   EXPECT_EQ(t.stiffness.evaluate(m, next).cg_iterations, reference.cg_iterations);
 }
 
+// The server's tolerance (kRenderingStiffness, 10^-3): warm-started over a sequence of
+// tool positions, as a session evaluates it, K and the valid radius stay within 10^-3
+// of a 10^-12 solve of each state (whose K the finite differences above verify).
+TEST(ContactStiffness, TheRenderingToleranceKeepsKWithinAThousandth) {
+  Site t = site(kMlsCube, 0.07, 0.03, 0.03);
+  const Model& m = t.setup.model;
+  ContactStiffness rendering(m, kRenderingStiffness), tight(m, {1e-12, 2000});
+  int iterations = 0, tight_iterations = 0;
+  for (int k = 0; k <= 10; ++k) {  // 0.1 mm a tick, down and sideways
+    const State at = held_at(t.setup, t.state, t.local.origin + 1e-4 * k * Vec3(1, 0, -2).normalized());
+    const LocalContactModel served = rendering.evaluate(m, at);
+    tight.clear_warm_start();
+    const LocalContactModel exact = tight.evaluate(m, at);
+    ASSERT_TRUE(served.converged && exact.converged) << "tick " << k;
+    ASSERT_EQ(served.active_count, exact.active_count);
+    EXPECT_LT(max_abs(served.stiffness - exact.stiffness), 1e-3 * max_abs(exact.stiffness)) << "tick " << k;
+    EXPECT_NEAR(served.valid_radius, exact.valid_radius, 1e-3 * exact.valid_radius) << "tick " << k;
+    if (k > 0) iterations += served.cg_iterations, tight_iterations += exact.cg_iterations;
+  }
+  std::printf("10 warm-started evaluations: %d CG iterations at 1e-3, %d from zero at 1e-12\n", iterations,
+              tight_iterations);
+  EXPECT_LT(iterations, tight_iterations / 4);
+}
+
 TEST(ContactStiffness, ConvergedFlagIsHonest) {
   Site t = site(kMlsCube, 0.0, 0.0, 0.03);
   const Model& m = t.setup.model;

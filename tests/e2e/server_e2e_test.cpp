@@ -691,7 +691,10 @@ TEST(ServerE2E, BlowUpIsDetectedRecoveredAndNeverStreamed) {
       // Caught by the health checks while still a body (the cube spans |x| <= 2 m).
       ASSERT_LT(f.largest_coordinate, 4.0f) << "frame at tick " << f.tick;
     }
-    EXPECT_GT(achieved_rate(c, session), kMinRateHz - 50.0);
+    // Recoveries (a checkpoint restored) cost the loop little: the bar is half the rate of
+    // a healthy session, which a loaded machine does not fail and a loop stalled by its
+    // recoveries would.
+    EXPECT_GT(achieved_rate(c, session), kMinRateHz / 2);
   }
 }
 
