@@ -238,6 +238,11 @@ struct Result {
   // (Frame.deadlineMisses: the newest frame's), against the stats' count at the end.
   Percentiles model_age_ms;
   uint64_t misses_seen_in_frames = 0;
+  // How many ticks the contact stiffness of a frame's local model lags the frame's own
+  // tick (LocalModel.stiffnessTick), and the frames that carried a contact force but no
+  // stiffness yet (K = 0: the local model renders the hold).
+  Percentiles stiffness_age_ticks;
+  size_t touching_without_stiffness = 0;
   // Multirate: every frame received, by render tick (the force the server rendered and
   // where), for a replay against the scene stepped at the render rate
   // (palpate-bench-haptic --replay-truth).
