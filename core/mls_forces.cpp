@@ -585,6 +585,98 @@ PALPATE_INLINE int polar_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)[
   return 0;
 }
 
+// The blocked loop's rotation, first choice: the Newton-Schulz iteration
+//
+//     X <- X (3 I - X^T X) / 2,   X_0 = F                                  (1.17)
+//
+// on all lanes of G blocks. It keeps the singular vectors of F and maps each singular
+// value s to s (3 - s^2) / 2, so it converges to the polar rotation R (the nearest
+// reflection for det F < 0, as polar_rotation) when every singular value of F lies in
+// (0, sqrt 3), quadratically near 1: 1 + e -> 1 - e^2 (3 + e) / 2. It needs neither a
+// division nor a square root -- only FMAs in short dependency chains -- where the scaled
+// Newton iteration waits on a division and two square roots per step. Its basin is checked
+// on A = X_0^T X_0 = F^T F: with m = tr A / 3 and the deviator D = A - m I, the largest
+// eigenvalue of A (the largest squared singular value) is at most m + (2/3)^(1/2) |D|,
+// required <= 2.25, i.e. every singular value <= 1.5 (the bound is exact for a uniaxial
+// deviator and above the largest eigenvalue by up to 0.155 (it - m) otherwise; every F with singular values in 0.5-1.3 passes, and tissue strains stay far
+// inside). The defect E = X^T X - I, computed for the update anyway, measures the distance
+// to R exactly: its eigenvalues are s_k^2 - 1 = 2 e_k + e_k^2. When its squared
+// Frobenius norm is below 1e-16 (every |e_k| < 5.1e-9) the step taken with it leaves
+// |e_k| < 4e-17, below the rounding of R's entries, and the iteration stops. Returns the
+// number of iterations; 0 when a lane is outside the basin or has not converged after
+// kSchulzMaxIterations (a small singular value grows only by 3/2 per step): the caller
+// then takes the scaled Newton iteration. `attempted` receives the iterations spent.
+constexpr double kSchulzDefectTolerance = 1e-16;
+constexpr double kSchulzEigenvalueBound = 2.25;
+constexpr int kSchulzMaxIterations = 9;
+
+template <int G>
+PALPATE_INLINE int schulz_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)[G], int* attempted = nullptr) {
+  PALPATE_UNROLL
+  for (int g = 0; g < G; ++g) R[g] = F[g];
+  for (int it = 0; it < kSchulzMaxIterations; ++it) {
+    Lanes A[G][6];  // X^T X: (0,0), (1,1), (2,2), (0,1), (0,2), (1,2)
+    Lanes defect[G];
+    PALPATE_UNROLL
+    for (int g = 0; g < G; ++g) {
+      const Mat3Lanes& X = R[g];
+      auto XtX = [&](int a, int b) { return X(0, a) * X(0, b) + X(1, a) * X(1, b) + X(2, a) * X(2, b); };
+      A[g][0] = XtX(0, 0);
+      A[g][1] = XtX(1, 1);
+      A[g][2] = XtX(2, 2);
+      A[g][3] = XtX(0, 1);
+      A[g][4] = XtX(0, 2);
+      A[g][5] = XtX(1, 2);
+      const Lanes e0 = A[g][0] - 1.0, e1 = A[g][1] - 1.0, e2 = A[g][2] - 1.0;
+      defect[g] = e0 * e0 + e1 * e1 + e2 * e2 + 2.0 * (A[g][3] * A[g][3] + A[g][4] * A[g][4] + A[g][5] * A[g][5]);
+    }
+    if (it == 0) {  // the basin: m + (2/3)^(1/2) |D| <= bound, squared (no root)
+      bool inside = true;
+      PALPATE_UNROLL
+      for (int g = 0; g < G; ++g) {
+        const Lanes m = (A[g][0] + A[g][1] + A[g][2]) * (1.0 / 3.0);
+        const Lanes d0 = A[g][0] - m, d1 = A[g][1] - m, d2 = A[g][2] - m;
+        const Lanes deviator =
+            d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * (A[g][3] * A[g][3] + A[g][4] * A[g][4] + A[g][5] * A[g][5]);
+        const Lanes margin = kSchulzEigenvalueBound - m;
+        PALPATE_UNROLL
+        for (int l = 0; l < kLanes; ++l)
+          inside = inside && margin[l] >= 0 && (2.0 / 3.0) * deviator[l] <= margin[l] * margin[l];
+      }
+      if (!inside) {
+        if (attempted) *attempted = 0;
+        return 0;
+      }
+    }
+    PALPATE_UNROLL
+    for (int g = 0; g < G; ++g) {  // X <- X M, M = (3 I - X^T X) / 2 (symmetric)
+      Mat3Lanes M;
+      M(0, 0) = 1.5 - 0.5 * A[g][0];
+      M(1, 1) = 1.5 - 0.5 * A[g][1];
+      M(2, 2) = 1.5 - 0.5 * A[g][2];
+      M(0, 1) = M(1, 0) = -0.5 * A[g][3];
+      M(0, 2) = M(2, 0) = -0.5 * A[g][4];
+      M(1, 2) = M(2, 1) = -0.5 * A[g][5];
+      const Mat3Lanes X = R[g];
+      PALPATE_UNROLL
+      for (int r = 0; r < 3; ++r)
+        PALPATE_UNROLL
+        for (int c = 0; c < 3; ++c) R[g](r, c) = X(r, 0) * M(0, c) + X(r, 1) * M(1, c) + X(r, 2) * M(2, c);
+    }
+    bool converged = true;
+    PALPATE_UNROLL
+    for (int g = 0; g < G; ++g)
+      PALPATE_UNROLL
+      for (int l = 0; l < kLanes; ++l) converged = converged && defect[g][l] < kSchulzDefectTolerance;
+    if (converged) {
+      if (attempted) *attempted = it + 1;
+      return it + 1;
+    }
+  }
+  if (attempted) *attempted = kSchulzMaxIterations;
+  return 0;
+}
+
 // v_i P_i of the laws other than St Venant-Kirchhoff, one lane at a time (the polar
 // decomposition iterates a data-dependent number of times); the gather and scatter stay blocked.
 PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
@@ -603,7 +695,7 @@ template <bool volume_term, int G>
 PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes (&F)[G], const Lanes (&v)[G],
                                                  const Lanes (&lambda)[G], const Lanes (&mu)[G], Mat3Lanes (&vP)[G]) {
   Mat3Lanes R[G];
-  if (polar_rotation_lanes<G>(F, R) == 0) {
+  if (schulz_rotation_lanes<G>(F, R) == 0 && polar_rotation_lanes<G>(F, R) == 0) {
     for (int g = 0; g < G; ++g) weighted_stress_per_lane(m, F[g], v[g], lambda[g], mu[g], vP[g]);
     return;
   }
@@ -795,24 +887,43 @@ bool use_blocks(const Model& m) {
          static_cast<int>(m.blocks.size()) * kLanes >= m.particle_count;
 }
 
-// Iterations of the blocked loop's polar decompositions at positions x (corotational
-// law), each counted once per real (not padding) lane: all of them, and those that took
-// the scaling. Blocks that fall back to polar_rotation are not counted.
-void count_polar_iterations(const Model& m, const double* x, double& iterations, double& scaled_iterations) {
-  iterations = scaled_iterations = 0;
-  const int n = m.particle_count;
-  for (int b = 0; b < static_cast<int>(m.blocks.size()); ++b) {
+// Iterations of the blocked loop's rotations at positions x (corotational law), over the
+// loop's pairs of blocks, each counted once per real (not padding) lane: the Newton-Schulz
+// iterations (1.17) spent (also by pairs that then fall back), the scaled Newton
+// iterations of the pairs that fall back to them, and those of the latter that took the
+// scaling. Pairs that fall back to polar_rotation are not counted further.
+void count_polar_iterations(const Model& m, const double* x, double& schulz_iterations, double& newton_iterations,
+                            double& scaled_iterations) {
+  schulz_iterations = newton_iterations = scaled_iterations = 0;
+  const int n = m.particle_count, blocks = static_cast<int>(m.blocks.size());
+  auto gradients = [&](int b, Mat3Lanes& F) {
     const Block& block = m.blocks[b];
     int i[kLanes];
     block_particles(b, n, i);
-    Mat3Lanes F[1], R[1];
     PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) F[0].m[k] = load(block.rest_correction[k]);
-    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i, F[0]);
-    int scaled = 0;
-    const int lanes = std::min(kLanes, n - kLanes * b);
-    iterations += lanes * polar_rotation_lanes<1>(F, R, &scaled);
-    scaled_iterations += lanes * scaled;
+    for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
+    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i, F);
+    return std::min(kLanes, n - kLanes * b);
+  };
+  auto count = [&](auto& F, auto& R, int lanes) {
+    int spent = 0, scaled = 0;
+    schulz_rotation_lanes(F, R, &spent);
+    schulz_iterations += lanes * spent;
+    if (schulz_rotation_lanes(F, R) == 0) {
+      newton_iterations += lanes * polar_rotation_lanes(F, R, &scaled);
+      scaled_iterations += lanes * scaled;
+    }
+  };
+  int b = 0;
+  for (; b + 2 <= blocks; b += 2) {  // the pairs of internal_forces_blocked
+    Mat3Lanes F[2], R[2];
+    const int lanes = gradients(b, F[0]) + gradients(b + 1, F[1]);
+    count(F, R, lanes);
+  }
+  for (; b < blocks; ++b) {
+    Mat3Lanes F[1], R[1];
+    const int lanes = gradients(b, F[0]);
+    count(F, R, lanes);
   }
 }
 
@@ -876,13 +987,31 @@ bool detail::uses_blocked_loops(const Model& model) { return use_blocks(model); 
 
 Mat3 detail::polar_rotation(const Mat3& F) { return palpate::polar_rotation(F); }
 
-int detail::polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]) {
-  Mat3Lanes F_lanes[1], R_lanes[1];
+namespace {
+void to_lanes(const Mat3 (&F)[Model::block_width], Mat3Lanes (&F_lanes)[1]) {
   for (int l = 0; l < kLanes; ++l)
     for (int k = 0; k < 9; ++k) F_lanes[0].m[k][l] = F[l](k % 3, k / 3);
-  const int iterations = polar_rotation_lanes<1>(F_lanes, R_lanes);
+}
+void from_lanes(const Mat3Lanes (&R_lanes)[1], Mat3 (&R)[Model::block_width]) {
   for (int l = 0; l < kLanes; ++l)
     for (int k = 0; k < 9; ++k) R[l](k % 3, k / 3) = R_lanes[0].m[k][l];
+}
+}  // namespace
+
+int detail::polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]) {
+  Mat3Lanes F_lanes[1], R_lanes[1];
+  to_lanes(F, F_lanes);
+  int iterations = schulz_rotation_lanes<1>(F_lanes, R_lanes);
+  if (iterations == 0) iterations = polar_rotation_lanes<1>(F_lanes, R_lanes);
+  from_lanes(R_lanes, R);
+  return iterations;
+}
+
+int detail::schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]) {
+  Mat3Lanes F_lanes[1], R_lanes[1];
+  to_lanes(F, F_lanes);
+  const int iterations = schulz_rotation_lanes<1>(F_lanes, R_lanes);
+  from_lanes(R_lanes, R);
   return iterations;
 }
 
@@ -1024,13 +1153,16 @@ double mls_internal_forces_flops(const Model& m, const Points& x) {
         // After the polar decomposition: tr(R^T F) - 3 (1 mul + 8 fma + 1) = 18, 2 mu v 2,
         // lambda v tr 2, P = 2 mu v (F - R) + lambda v tr R 9 x (sub + mul + fma) = 36: 58.
         per_particle += 58.0;
-        // Each Newton iteration of polar_rotation_lanes: cof R 27, det R 5, 1 / det 1, the
-        // update a R + b cof R 9 x (mul + fma) = 27, its squared change 9 x (sub + fma) = 27:
-        // 87; a scaled one also |R|^2, |cof R|^2 2 x (1 mul + 8 fma) = 34, g (2 mul, 1 div,
-        // 2 sqrt, 3 for the lanes' choice) 8, a 1, g det 1: 131. Data dependent: counted at x.
-        double iterations = 0, scaled = 0;
-        count_polar_iterations(m, x.data(), iterations, scaled);
-        polar = 87.0 * iterations + 44.0 * scaled;
+        // Each Newton-Schulz iteration (1.17) of schulz_rotation_lanes: X^T X 6 x (mul + 2 fma)
+        // = 30, its defect |X^T X - I|^2 3 sub + 2 x (mul + 2 fma) + mul + add = 15, M = (3 I -
+        // X^T X) / 2 3 fma + 3 mul = 9, X M 9 x (mul + 2 fma) = 45: 99. Each Newton iteration of
+        // polar_rotation_lanes (the fallback): cof R 27, det R 5, 1 / det 1, the update
+        // a R + b cof R 9 x (mul + fma) = 27, its squared change 9 x (sub + fma) = 27: 87; a
+        // scaled one also |R|^2, |cof R|^2 2 x (1 mul + 8 fma) = 34, g (2 mul, 1 div, 2 sqrt,
+        // 3 for the lanes' choice) 8, a 1, g det 1: 131. Data dependent: counted at x.
+        double schulz = 0, newton = 0, scaled = 0;
+        count_polar_iterations(m, x.data(), schulz, newton, scaled);
+        polar = 99.0 * schulz + 87.0 * newton + 44.0 * scaled;
         break;
       }
     }
