@@ -585,29 +585,31 @@ PALPATE_INLINE int polar_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)[
   return 0;
 }
 
-// The blocked loop's rotation, first choice: the Newton-Schulz iteration
+// The blocked loop's rotation, first choice: the polynomial (Newton-Schulz type) iteration
 //
-//     X <- X (3 I - X^T X) / 2,   X_0 = F                                  (1.17)
+//     X <- X (15 I - 10 A + 3 A^2) / 8,   A = X^T X,   X_0 = F             (1.17)
 //
-// on all lanes of G blocks. It keeps the singular vectors of F and maps each singular
-// value s to s (3 - s^2) / 2, so it converges to the polar rotation R (the nearest
-// reflection for det F < 0, as polar_rotation) when every singular value of F lies in
-// (0, sqrt 3), quadratically near 1: 1 + e -> 1 - e^2 (3 + e) / 2. It needs neither a
-// division nor a square root -- only FMAs in short dependency chains -- where the scaled
-// Newton iteration waits on a division and two square roots per step. Its basin is checked
-// on A = X_0^T X_0 = F^T F: with m = tr A / 3 and the deviator D = A - m I, the largest
-// eigenvalue of A (the largest squared singular value) is at most m + (2/3)^(1/2) |D|,
-// required <= 2.25, i.e. every singular value <= 1.5 (the bound is exact for a uniaxial
-// deviator and above the largest eigenvalue by up to 0.155 (it - m) otherwise; every F with singular values in 0.5-1.3 passes, and tissue strains stay far
-// inside). The defect E = X^T X - I, computed for the update anyway, measures the distance
-// to R exactly: its eigenvalues are s_k^2 - 1 = 2 e_k + e_k^2. When its squared
-// Frobenius norm is below 1e-16 (every |e_k| < 5.1e-9) the step taken with it leaves
-// |e_k| < 4e-17, below the rounding of R's entries, and the iteration stops. Returns the
-// number of iterations; 0 when a lane is outside the basin or has not converged after
-// kSchulzMaxIterations (a small singular value grows only by 3/2 per step): the caller
+// on all lanes of G blocks (Kenney and Laub's third-order polynomial iteration for the
+// polar factor). It keeps the singular vectors of F and maps each singular value s to
+// f(s) = s (15 - 10 s^2 + 3 s^4) / 8, increasing, with 1 - f(s) = (1 - s)^3 (8 + 9 s + 3 s^2) / 8:
+// for s in (0, (7/3)^(1/2)) it converges monotonically to 1, cubically near 1
+// (1 + e -> 1 + e^3 (20 + 15 e + 3 e^2) / 8), so X converges to the polar rotation R (the
+// nearest reflection for det F < 0, as polar_rotation). It needs neither a division nor a
+// square root -- only FMAs in short dependency chains -- where the scaled Newton iteration
+// waits on a division and two square roots per step. Its basin is checked on A_0 = F^T F:
+// with m = tr A_0 / 3 and the deviator D = A_0 - m I, the largest eigenvalue of A_0 (the
+// largest squared singular value) is at most m + (2/3)^(1/2) |D|, required <= 2, i.e. every
+// singular value <= 2^(1/2) (the bound is exact for a uniaxial deviator and above the
+// largest eigenvalue by up to 0.155 (it - m) otherwise; tissue strains stay far inside).
+// The defect E = A - I, computed for the update anyway, measures the distance to R
+// exactly: its eigenvalues are s_k^2 - 1 = 2 e_k + e_k^2. When its squared Frobenius norm
+// is below 4e-11 (every |e_k| < 3.2e-6) the step taken with it leaves |e_k| < 8e-17, a
+// third of the rounding unit of R's entries, and the iteration stops. Returns the number
+// of iterations; 0 when a lane is outside the basin or has not converged after
+// kSchulzMaxIterations (a small singular value grows only by 15/8 per step): the caller
 // then takes the scaled Newton iteration. `attempted` receives the iterations spent.
-constexpr double kSchulzDefectTolerance = 1e-16;
-constexpr double kSchulzEigenvalueBound = 2.25;
+constexpr double kSchulzDefectTolerance = 4e-11;
+constexpr double kSchulzEigenvalueBound = 2.0;
 constexpr int kSchulzMaxIterations = 9;
 
 template <int G>
@@ -649,14 +651,18 @@ PALPATE_INLINE int schulz_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)
       }
     }
     PALPATE_UNROLL
-    for (int g = 0; g < G; ++g) {  // X <- X M, M = (3 I - X^T X) / 2 (symmetric)
+    for (int g = 0; g < G; ++g) {  // X <- X M, M = (15 I - 10 A + 3 A^2) / 8 (symmetric)
+      const Lanes* a = A[g];
+      const Lanes B[6] = {a[0] * a[0] + a[3] * a[3] + a[4] * a[4], a[3] * a[3] + a[1] * a[1] + a[5] * a[5],
+                          a[4] * a[4] + a[5] * a[5] + a[2] * a[2], a[0] * a[3] + a[3] * a[1] + a[4] * a[5],
+                          a[0] * a[4] + a[3] * a[5] + a[4] * a[2], a[3] * a[4] + a[1] * a[5] + a[5] * a[2]};  // A^2
       Mat3Lanes M;
-      M(0, 0) = 1.5 - 0.5 * A[g][0];
-      M(1, 1) = 1.5 - 0.5 * A[g][1];
-      M(2, 2) = 1.5 - 0.5 * A[g][2];
-      M(0, 1) = M(1, 0) = -0.5 * A[g][3];
-      M(0, 2) = M(2, 0) = -0.5 * A[g][4];
-      M(1, 2) = M(2, 1) = -0.5 * A[g][5];
+      M(0, 0) = (15.0 / 8) - (10.0 / 8) * a[0] + (3.0 / 8) * B[0];
+      M(1, 1) = (15.0 / 8) - (10.0 / 8) * a[1] + (3.0 / 8) * B[1];
+      M(2, 2) = (15.0 / 8) - (10.0 / 8) * a[2] + (3.0 / 8) * B[2];
+      M(0, 1) = M(1, 0) = (3.0 / 8) * B[3] - (10.0 / 8) * a[3];
+      M(0, 2) = M(2, 0) = (3.0 / 8) * B[4] - (10.0 / 8) * a[4];
+      M(1, 2) = M(2, 1) = (3.0 / 8) * B[5] - (10.0 / 8) * a[5];
       const Mat3Lanes X = R[g];
       PALPATE_UNROLL
       for (int r = 0; r < 3; ++r)
@@ -888,7 +894,7 @@ bool use_blocks(const Model& m) {
 }
 
 // Iterations of the blocked loop's rotations at positions x (corotational law), over the
-// loop's pairs of blocks, each counted once per real (not padding) lane: the Newton-Schulz
+// loop's pairs of blocks, each counted once per real (not padding) lane: the polynomial
 // iterations (1.17) spent (also by pairs that then fall back), the scaled Newton
 // iterations of the pairs that fall back to them, and those of the latter that took the
 // scaling. Pairs that fall back to polar_rotation are not counted further.
@@ -1153,16 +1159,17 @@ double mls_internal_forces_flops(const Model& m, const Points& x) {
         // After the polar decomposition: tr(R^T F) - 3 (1 mul + 8 fma + 1) = 18, 2 mu v 2,
         // lambda v tr 2, P = 2 mu v (F - R) + lambda v tr R 9 x (sub + mul + fma) = 36: 58.
         per_particle += 58.0;
-        // Each Newton-Schulz iteration (1.17) of schulz_rotation_lanes: X^T X 6 x (mul + 2 fma)
-        // = 30, its defect |X^T X - I|^2 3 sub + 2 x (mul + 2 fma) + mul + add = 15, M = (3 I -
-        // X^T X) / 2 3 fma + 3 mul = 9, X M 9 x (mul + 2 fma) = 45: 99. Each Newton iteration of
+        // Each iteration (1.17) of schulz_rotation_lanes: A = X^T X 6 x (mul + 2 fma) = 30, its
+        // defect |A - I|^2 3 sub + 2 x (mul + 2 fma) + mul + add = 15, A^2 6 x (mul + 2 fma) = 30,
+        // M = (15 I - 10 A + 3 A^2) / 8 6 x 2 fma = 24, X M 9 x (mul + 2 fma) = 45: 144 (the first
+        // also checks the basin, not counted). Each Newton iteration of
         // polar_rotation_lanes (the fallback): cof R 27, det R 5, 1 / det 1, the update
         // a R + b cof R 9 x (mul + fma) = 27, its squared change 9 x (sub + fma) = 27: 87; a
         // scaled one also |R|^2, |cof R|^2 2 x (1 mul + 8 fma) = 34, g (2 mul, 1 div, 2 sqrt,
         // 3 for the lanes' choice) 8, a 1, g det 1: 131. Data dependent: counted at x.
         double schulz = 0, newton = 0, scaled = 0;
         count_polar_iterations(m, x.data(), schulz, newton, scaled);
-        polar = 99.0 * schulz + 87.0 * newton + 44.0 * scaled;
+        polar = 144.0 * schulz + 87.0 * newton + 44.0 * scaled;
         break;
       }
     }
