@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cassert>
 #include <cstring>
@@ -750,16 +751,48 @@ PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lan
   }
 }
 
+using LaneBits = long long __attribute__((vector_size(kLanes * sizeof(long long))));
+
+// ln a of each lane, packed, for a in [1e-300, 1e300]: a = 2^k m with m in [2^-1/2, 2^1/2),
+// ln a = k ln 2 + 2 atanh(s), s = (m - 1) / (m + 1) (m - 1 exact), |s| <= 0.1716, by the
+// series 2 (s + s^3/3 + ... + s^19/19), whose next term is below 1e-17 |2 s|; k ln 2 in a
+// high part exact for any k and a low part. Within a few units of rounding of std::log
+// (tests/mls_forces_test.cpp); four calls of std::log per block took 5-7 % of the
+// neo-Hookean loop's time on the haptic scene's cloud.
+PALPATE_INLINE Lanes log_lanes(const Lanes a) {
+  constexpr double kLn2High = 6.93147180369123816490e-01, kLn2Low = 1.90821492927058770002e-10;
+  const LaneBits bits = std::bit_cast<LaneBits>(a);
+  Lanes m = std::bit_cast<Lanes>((bits & 0x000fffffffffffffLL) | 0x3ff0000000000000LL);  // [1, 2)
+  const LaneBits high = m > M_SQRT2;  // -1 where m >= 2^1/2: m / 2, k + 1
+  m = high ? 0.5 * m : m;
+  const LaneBits biased_k = ((bits >> 52) & 0x7ff) - high;
+  // k as a double: the biased exponent in the mantissa of 2^52, minus 2^52 + 1023 (exact).
+  const Lanes k = std::bit_cast<Lanes>(biased_k | 0x4330000000000000LL) - (4503599627370496.0 + 1023.0);
+  const Lanes s = (m - 1.0) / (m + 1.0), s2 = s * s;
+  Lanes series = Lanes{} + 1.0 / 19;
+  PALPATE_UNROLL
+  for (int d = 17; d >= 3; d -= 2) series = series * s2 + 1.0 / d;  // (s^-1 atanh s - 1) / s^2
+  const Lanes two_s = 2.0 * s;
+  return k * kLn2High + (two_s + (two_s * s2 * series + k * kLn2Low));
+}
+
 // J = det F (through its cofactor C, written) and ln J on the four lanes; false when a
 // lane has J <= 0, where the neo-Hookean law exerts nothing (the per-lane formula handles
-// the block).
+// the block). ln J packed (log_lanes), or lane by lane outside [1e-300, 1e300].
 PALPATE_INLINE bool log_det_lanes(const Mat3Lanes& F, Mat3Lanes& C, Lanes& J, Lanes& log_J) {
   cofactor_lanes(F, C);
   J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  bool packed = true;
   PALPATE_UNROLL
   for (int l = 0; l < kLanes; ++l) {
     if (!(J[l] > 0)) return false;
-    log_J[l] = std::log(J[l]);
+    packed = packed && J[l] >= 1e-300 && J[l] <= 1e300;
+  }
+  if (packed) {
+    log_J = log_lanes(J);
+  } else {
+    PALPATE_UNROLL
+    for (int l = 0; l < kLanes; ++l) log_J[l] = std::log(J[l]);
   }
   return true;
 }
@@ -1021,6 +1054,13 @@ int detail::schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&
   return iterations;
 }
 
+void detail::log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::block_width]) {
+  Lanes v;
+  std::memcpy(&v, a, sizeof v);
+  const Lanes r = log_lanes(v);
+  std::memcpy(log_a, &r, sizeof r);
+}
+
 Mat3 deformation_gradient(const Model& model, const Points& x, int i) { return gradient_at(model, x.data(), i); }
 
 double first_piola_stress(const Model& model, const Mat3& F, Mat3& P) {
@@ -1151,9 +1191,10 @@ double mls_internal_forces_flops(const Model& m, const Points& x) {
         per_particle += 23.0;
         break;
       case MaterialLaw::neo_hookean:
-        // (1.14): cof F 27, J 5, ln J 1, mu v 1, v (lambda ln J - mu) / J 4, P = mu v F + s cof F
-        // 9 x (mul + fma) = 27: 65.
-        per_particle += 65.0;
+        // (1.14): cof F 27, J 5, ln J 30 (log_lanes: the reduction 2, s 3, s^2 1, the series
+        // 8 fma 16, 2 s 1, 2 s s^2 p 2, + k ln 2 in two parts 5), mu v 1, v (lambda ln J - mu) / J
+        // 4, P = mu v F + s cof F 9 x (mul + fma) = 27: 94.
+        per_particle += 94.0;
         break;
       case MaterialLaw::corotational: {
         // After the polar decomposition: tr(R^T F) - 3 (1 mul + 8 fma + 1) = 18, 2 mu v 2,

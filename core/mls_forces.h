@@ -78,6 +78,8 @@ bool uses_blocked_loops(const Model& model);
 Mat3 polar_rotation(const Mat3& F);
 int polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]);
 int schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]);
+// ln a of the neo-Hookean blocked loop (packed), a in [1e-300, 1e300].
+void log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::block_width]);
 }  // namespace detail
 
 }  // namespace palpate
