@@ -590,6 +590,7 @@ PALPATE_INLINE int polar_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)[
 //
 //     X <- X (15 I - 10 A + 3 A^2) / 8,   A = X^T X,   X_0 = F             (1.17)
 //
+// (B in docs/physics.md, where A is the moment matrix)
 // on all lanes of G blocks (Kenney and Laub's third-order polynomial iteration for the
 // polar factor). It keeps the singular vectors of F and maps each singular value s to
 // f(s) = s (15 - 10 s^2 + 3 s^4) / 8, increasing, with 1 - f(s) = (1 - s)^3 (8 + 9 s + 3 s^2) / 8:
