@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cassert>
 #include <cstring>
@@ -585,6 +586,105 @@ PALPATE_INLINE int polar_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)[
   return 0;
 }
 
+// The blocked loop's rotation, first choice: the polynomial (Newton-Schulz type) iteration
+//
+//     X <- X (15 I - 10 A + 3 A^2) / 8,   A = X^T X,   X_0 = F             (1.17)
+//
+// (B in docs/physics.md, where A is the moment matrix)
+// on all lanes of G blocks (Kenney and Laub's third-order polynomial iteration for the
+// polar factor). It keeps the singular vectors of F and maps each singular value s to
+// f(s) = s (15 - 10 s^2 + 3 s^4) / 8, increasing, with 1 - f(s) = (1 - s)^3 (8 + 9 s + 3 s^2) / 8:
+// for s in (0, (7/3)^(1/2)) it converges monotonically to 1, cubically near 1
+// (1 + e -> 1 + e^3 (20 + 15 e + 3 e^2) / 8), so X converges to the polar rotation R (the
+// nearest reflection for det F < 0, as polar_rotation). It needs neither a division nor a
+// square root -- only FMAs in short dependency chains -- where the scaled Newton iteration
+// waits on a division and two square roots per step. Its basin is checked on A_0 = F^T F:
+// with m = tr A_0 / 3 and the deviator D = A_0 - m I, the largest eigenvalue of A_0 (the
+// largest squared singular value) is at most m + (2/3)^(1/2) |D|, required <= 2, i.e. every
+// singular value <= 2^(1/2) (the bound is exact for a uniaxial deviator and above the
+// largest eigenvalue by up to 0.155 (it - m) otherwise; tissue strains stay far inside).
+// The defect E = A - I, computed for the update anyway, measures the distance to R
+// exactly: its eigenvalues are s_k^2 - 1 = 2 e_k + e_k^2. When its squared Frobenius norm
+// is below 4e-11 (every |e_k| < 3.2e-6) the step taken with it leaves |e_k| < 8e-17, a
+// third of the rounding unit of R's entries, and the iteration stops. Returns the number
+// of iterations; 0 when a lane is outside the basin or has not converged after
+// kSchulzMaxIterations (a small singular value grows only by 15/8 per step): the caller
+// then takes the scaled Newton iteration. `attempted` receives the iterations spent.
+constexpr double kSchulzDefectTolerance = 4e-11;
+constexpr double kSchulzEigenvalueBound = 2.0;
+constexpr int kSchulzMaxIterations = 9;
+
+template <int G>
+PALPATE_INLINE int schulz_rotation_lanes(const Mat3Lanes (&F)[G], Mat3Lanes (&R)[G], int* attempted = nullptr) {
+  PALPATE_UNROLL
+  for (int g = 0; g < G; ++g) R[g] = F[g];
+  for (int it = 0; it < kSchulzMaxIterations; ++it) {
+    Lanes A[G][6];  // X^T X: (0,0), (1,1), (2,2), (0,1), (0,2), (1,2)
+    Lanes defect[G];
+    PALPATE_UNROLL
+    for (int g = 0; g < G; ++g) {
+      const Mat3Lanes& X = R[g];
+      auto XtX = [&](int a, int b) { return X(0, a) * X(0, b) + X(1, a) * X(1, b) + X(2, a) * X(2, b); };
+      A[g][0] = XtX(0, 0);
+      A[g][1] = XtX(1, 1);
+      A[g][2] = XtX(2, 2);
+      A[g][3] = XtX(0, 1);
+      A[g][4] = XtX(0, 2);
+      A[g][5] = XtX(1, 2);
+      const Lanes e0 = A[g][0] - 1.0, e1 = A[g][1] - 1.0, e2 = A[g][2] - 1.0;
+      defect[g] = e0 * e0 + e1 * e1 + e2 * e2 + 2.0 * (A[g][3] * A[g][3] + A[g][4] * A[g][4] + A[g][5] * A[g][5]);
+    }
+    if (it == 0) {  // the basin: m + (2/3)^(1/2) |D| <= bound, squared (no root)
+      bool inside = true;
+      PALPATE_UNROLL
+      for (int g = 0; g < G; ++g) {
+        const Lanes m = (A[g][0] + A[g][1] + A[g][2]) * (1.0 / 3.0);
+        const Lanes d0 = A[g][0] - m, d1 = A[g][1] - m, d2 = A[g][2] - m;
+        const Lanes deviator =
+            d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * (A[g][3] * A[g][3] + A[g][4] * A[g][4] + A[g][5] * A[g][5]);
+        const Lanes margin = kSchulzEigenvalueBound - m;
+        PALPATE_UNROLL
+        for (int l = 0; l < kLanes; ++l)
+          inside = inside && margin[l] >= 0 && (2.0 / 3.0) * deviator[l] <= margin[l] * margin[l];
+      }
+      if (!inside) {
+        if (attempted) *attempted = 0;
+        return 0;
+      }
+    }
+    PALPATE_UNROLL
+    for (int g = 0; g < G; ++g) {  // X <- X M, M = (15 I - 10 A + 3 A^2) / 8 (symmetric)
+      const Lanes* a = A[g];
+      const Lanes B[6] = {a[0] * a[0] + a[3] * a[3] + a[4] * a[4], a[3] * a[3] + a[1] * a[1] + a[5] * a[5],
+                          a[4] * a[4] + a[5] * a[5] + a[2] * a[2], a[0] * a[3] + a[3] * a[1] + a[4] * a[5],
+                          a[0] * a[4] + a[3] * a[5] + a[4] * a[2], a[3] * a[4] + a[1] * a[5] + a[5] * a[2]};  // A^2
+      Mat3Lanes M;
+      M(0, 0) = (15.0 / 8) - (10.0 / 8) * a[0] + (3.0 / 8) * B[0];
+      M(1, 1) = (15.0 / 8) - (10.0 / 8) * a[1] + (3.0 / 8) * B[1];
+      M(2, 2) = (15.0 / 8) - (10.0 / 8) * a[2] + (3.0 / 8) * B[2];
+      M(0, 1) = M(1, 0) = (3.0 / 8) * B[3] - (10.0 / 8) * a[3];
+      M(0, 2) = M(2, 0) = (3.0 / 8) * B[4] - (10.0 / 8) * a[4];
+      M(1, 2) = M(2, 1) = (3.0 / 8) * B[5] - (10.0 / 8) * a[5];
+      const Mat3Lanes X = R[g];
+      PALPATE_UNROLL
+      for (int r = 0; r < 3; ++r)
+        PALPATE_UNROLL
+        for (int c = 0; c < 3; ++c) R[g](r, c) = X(r, 0) * M(0, c) + X(r, 1) * M(1, c) + X(r, 2) * M(2, c);
+    }
+    bool converged = true;
+    PALPATE_UNROLL
+    for (int g = 0; g < G; ++g)
+      PALPATE_UNROLL
+      for (int l = 0; l < kLanes; ++l) converged = converged && defect[g][l] < kSchulzDefectTolerance;
+    if (converged) {
+      if (attempted) *attempted = it + 1;
+      return it + 1;
+    }
+  }
+  if (attempted) *attempted = kSchulzMaxIterations;
+  return 0;
+}
+
 // v_i P_i of the laws other than St Venant-Kirchhoff, one lane at a time (the polar
 // decomposition iterates a data-dependent number of times); the gather and scatter stay blocked.
 PALPATE_INLINE void weighted_stress_per_lane(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
@@ -603,7 +703,7 @@ template <bool volume_term, int G>
 PALPATE_INLINE void weighted_corotational_stress(const Model& m, const Mat3Lanes (&F)[G], const Lanes (&v)[G],
                                                  const Lanes (&lambda)[G], const Lanes (&mu)[G], Mat3Lanes (&vP)[G]) {
   Mat3Lanes R[G];
-  if (polar_rotation_lanes<G>(F, R) == 0) {
+  if (schulz_rotation_lanes<G>(F, R) == 0 && polar_rotation_lanes<G>(F, R) == 0) {
     for (int g = 0; g < G; ++g) weighted_stress_per_lane(m, F[g], v[g], lambda[g], mu[g], vP[g]);
     return;
   }
@@ -652,16 +752,48 @@ PALPATE_INLINE void weighted_differential_per_lane(const Model& m, const Mat3Lan
   }
 }
 
+using LaneBits = long long __attribute__((vector_size(kLanes * sizeof(long long))));
+
+// ln a of each lane, packed, for a in [1e-300, 1e300]: a = 2^k m with m in [2^-1/2, 2^1/2),
+// ln a = k ln 2 + 2 atanh(s), s = (m - 1) / (m + 1) (m - 1 exact), |s| <= 0.1716, by the
+// series 2 (s + s^3/3 + ... + s^19/19), whose next term is below 1e-17 |2 s|; k ln 2 in a
+// high part exact for any k and a low part. Within a few units of rounding of std::log
+// (tests/mls_forces_test.cpp); four calls of std::log per block took 5-7 % of the
+// neo-Hookean loop's time on the haptic scene's cloud.
+PALPATE_INLINE Lanes log_lanes(const Lanes a) {
+  constexpr double kLn2High = 6.93147180369123816490e-01, kLn2Low = 1.90821492927058770002e-10;
+  const LaneBits bits = std::bit_cast<LaneBits>(a);
+  Lanes m = std::bit_cast<Lanes>((bits & 0x000fffffffffffffLL) | 0x3ff0000000000000LL);  // [1, 2)
+  const LaneBits high = m > M_SQRT2;  // -1 where m >= 2^1/2: m / 2, k + 1
+  m = high ? 0.5 * m : m;
+  const LaneBits biased_k = ((bits >> 52) & 0x7ff) - high;
+  // k as a double: the biased exponent in the mantissa of 2^52, minus 2^52 + 1023 (exact).
+  const Lanes k = std::bit_cast<Lanes>(biased_k | 0x4330000000000000LL) - (4503599627370496.0 + 1023.0);
+  const Lanes s = (m - 1.0) / (m + 1.0), s2 = s * s;
+  Lanes series = Lanes{} + 1.0 / 19;
+  PALPATE_UNROLL
+  for (int d = 17; d >= 3; d -= 2) series = series * s2 + 1.0 / d;  // (s^-1 atanh s - 1) / s^2
+  const Lanes two_s = 2.0 * s;
+  return k * kLn2High + (two_s + (two_s * s2 * series + k * kLn2Low));
+}
+
 // J = det F (through its cofactor C, written) and ln J on the four lanes; false when a
 // lane has J <= 0, where the neo-Hookean law exerts nothing (the per-lane formula handles
-// the block).
+// the block). ln J packed (log_lanes), or lane by lane outside [1e-300, 1e300].
 PALPATE_INLINE bool log_det_lanes(const Mat3Lanes& F, Mat3Lanes& C, Lanes& J, Lanes& log_J) {
   cofactor_lanes(F, C);
   J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  bool packed = true;
   PALPATE_UNROLL
   for (int l = 0; l < kLanes; ++l) {
     if (!(J[l] > 0)) return false;
-    log_J[l] = std::log(J[l]);
+    packed = packed && J[l] >= 1e-300 && J[l] <= 1e300;
+  }
+  if (packed) {
+    log_J = log_lanes(J);
+  } else {
+    PALPATE_UNROLL
+    for (int l = 0; l < kLanes; ++l) log_J[l] = std::log(J[l]);
   }
   return true;
 }
@@ -795,24 +927,43 @@ bool use_blocks(const Model& m) {
          static_cast<int>(m.blocks.size()) * kLanes >= m.particle_count;
 }
 
-// Iterations of the blocked loop's polar decompositions at positions x (corotational
-// law), each counted once per real (not padding) lane: all of them, and those that took
-// the scaling. Blocks that fall back to polar_rotation are not counted.
-void count_polar_iterations(const Model& m, const double* x, double& iterations, double& scaled_iterations) {
-  iterations = scaled_iterations = 0;
-  const int n = m.particle_count;
-  for (int b = 0; b < static_cast<int>(m.blocks.size()); ++b) {
+// Iterations of the blocked loop's rotations at positions x (corotational law), over the
+// loop's pairs of blocks, each counted once per real (not padding) lane: the polynomial
+// iterations (1.17) spent (also by pairs that then fall back), the scaled Newton
+// iterations of the pairs that fall back to them, and those of the latter that took the
+// scaling. Pairs that fall back to polar_rotation are not counted further.
+void count_polar_iterations(const Model& m, const double* x, double& schulz_iterations, double& newton_iterations,
+                            double& scaled_iterations) {
+  schulz_iterations = newton_iterations = scaled_iterations = 0;
+  const int n = m.particle_count, blocks = static_cast<int>(m.blocks.size());
+  auto gradients = [&](int b, Mat3Lanes& F) {
     const Block& block = m.blocks[b];
     int i[kLanes];
     block_particles(b, n, i);
-    Mat3Lanes F[1], R[1];
     PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) F[0].m[k] = load(block.rest_correction[k]);
-    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i, F[0]);
-    int scaled = 0;
-    const int lanes = std::min(kLanes, n - kLanes * b);
-    iterations += lanes * polar_rotation_lanes<1>(F, R, &scaled);
-    scaled_iterations += lanes * scaled;
+    for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
+    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i, F);
+    return std::min(kLanes, n - kLanes * b);
+  };
+  auto count = [&](auto& F, auto& R, int lanes) {
+    int spent = 0, scaled = 0;
+    schulz_rotation_lanes(F, R, &spent);
+    schulz_iterations += lanes * spent;
+    if (schulz_rotation_lanes(F, R) == 0) {
+      newton_iterations += lanes * polar_rotation_lanes(F, R, &scaled);
+      scaled_iterations += lanes * scaled;
+    }
+  };
+  int b = 0;
+  for (; b + 2 <= blocks; b += 2) {  // the pairs of internal_forces_blocked
+    Mat3Lanes F[2], R[2];
+    const int lanes = gradients(b, F[0]) + gradients(b + 1, F[1]);
+    count(F, R, lanes);
+  }
+  for (; b < blocks; ++b) {
+    Mat3Lanes F[1], R[1];
+    const int lanes = gradients(b, F[0]);
+    count(F, R, lanes);
   }
 }
 
@@ -876,14 +1027,39 @@ bool detail::uses_blocked_loops(const Model& model) { return use_blocks(model); 
 
 Mat3 detail::polar_rotation(const Mat3& F) { return palpate::polar_rotation(F); }
 
-int detail::polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]) {
-  Mat3Lanes F_lanes[1], R_lanes[1];
+namespace {
+void to_lanes(const Mat3 (&F)[Model::block_width], Mat3Lanes (&F_lanes)[1]) {
   for (int l = 0; l < kLanes; ++l)
     for (int k = 0; k < 9; ++k) F_lanes[0].m[k][l] = F[l](k % 3, k / 3);
-  const int iterations = polar_rotation_lanes<1>(F_lanes, R_lanes);
+}
+void from_lanes(const Mat3Lanes (&R_lanes)[1], Mat3 (&R)[Model::block_width]) {
   for (int l = 0; l < kLanes; ++l)
     for (int k = 0; k < 9; ++k) R[l](k % 3, k / 3) = R_lanes[0].m[k][l];
+}
+}  // namespace
+
+int detail::polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]) {
+  Mat3Lanes F_lanes[1], R_lanes[1];
+  to_lanes(F, F_lanes);
+  int iterations = schulz_rotation_lanes<1>(F_lanes, R_lanes);
+  if (iterations == 0) iterations = polar_rotation_lanes<1>(F_lanes, R_lanes);
+  from_lanes(R_lanes, R);
   return iterations;
+}
+
+int detail::schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]) {
+  Mat3Lanes F_lanes[1], R_lanes[1];
+  to_lanes(F, F_lanes);
+  const int iterations = schulz_rotation_lanes<1>(F_lanes, R_lanes);
+  from_lanes(R_lanes, R);
+  return iterations;
+}
+
+void detail::log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::block_width]) {
+  Lanes v;
+  std::memcpy(&v, a, sizeof v);
+  const Lanes r = log_lanes(v);
+  std::memcpy(log_a, &r, sizeof r);
 }
 
 Mat3 deformation_gradient(const Model& model, const Points& x, int i) { return gradient_at(model, x.data(), i); }
@@ -1016,21 +1192,26 @@ double mls_internal_forces_flops(const Model& m, const Points& x) {
         per_particle += 23.0;
         break;
       case MaterialLaw::neo_hookean:
-        // (1.14): cof F 27, J 5, ln J 1, mu v 1, v (lambda ln J - mu) / J 4, P = mu v F + s cof F
-        // 9 x (mul + fma) = 27: 65.
-        per_particle += 65.0;
+        // (1.14): cof F 27, J 5, ln J 30 (log_lanes: the reduction 2, s 3, s^2 1, the series
+        // 8 fma 16, 2 s 1, 2 s s^2 p 2, + k ln 2 in two parts 5), mu v 1, v (lambda ln J - mu) / J
+        // 4, P = mu v F + s cof F 9 x (mul + fma) = 27: 94.
+        per_particle += 94.0;
         break;
       case MaterialLaw::corotational: {
         // After the polar decomposition: tr(R^T F) - 3 (1 mul + 8 fma + 1) = 18, 2 mu v 2,
         // lambda v tr 2, P = 2 mu v (F - R) + lambda v tr R 9 x (sub + mul + fma) = 36: 58.
         per_particle += 58.0;
-        // Each Newton iteration of polar_rotation_lanes: cof R 27, det R 5, 1 / det 1, the
-        // update a R + b cof R 9 x (mul + fma) = 27, its squared change 9 x (sub + fma) = 27:
-        // 87; a scaled one also |R|^2, |cof R|^2 2 x (1 mul + 8 fma) = 34, g (2 mul, 1 div,
-        // 2 sqrt, 3 for the lanes' choice) 8, a 1, g det 1: 131. Data dependent: counted at x.
-        double iterations = 0, scaled = 0;
-        count_polar_iterations(m, x.data(), iterations, scaled);
-        polar = 87.0 * iterations + 44.0 * scaled;
+        // Each iteration (1.17) of schulz_rotation_lanes: A = X^T X 6 x (mul + 2 fma) = 30, its
+        // defect |A - I|^2 3 sub + 2 x (mul + 2 fma) + mul + add = 15, A^2 6 x (mul + 2 fma) = 30,
+        // M = (15 I - 10 A + 3 A^2) / 8 6 x 2 fma = 24, X M 9 x (mul + 2 fma) = 45: 144 (the first
+        // also checks the basin, not counted). Each Newton iteration of
+        // polar_rotation_lanes (the fallback): cof R 27, det R 5, 1 / det 1, the update
+        // a R + b cof R 9 x (mul + fma) = 27, its squared change 9 x (sub + fma) = 27: 87; a
+        // scaled one also |R|^2, |cof R|^2 2 x (1 mul + 8 fma) = 34, g (2 mul, 1 div, 2 sqrt,
+        // 3 for the lanes' choice) 8, a 1, g det 1: 131. Data dependent: counted at x.
+        double schulz = 0, newton = 0, scaled = 0;
+        count_polar_iterations(m, x.data(), schulz, newton, scaled);
+        polar = 144.0 * schulz + 87.0 * newton + 44.0 * scaled;
         break;
       }
     }

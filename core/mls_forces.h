@@ -70,10 +70,16 @@ bool uses_blocked_loops(const Model& model);
 
 // The polar rotation of the per-particle formulas (Higham's scaled Newton iteration to a
 // squared change of 1e-24), and the vectorised one of the blocked corotational loop on
-// four matrices at once; the latter returns its iteration count, or 0 when it leaves the
-// lanes to the former (a (nearly) singular F, or no convergence), R then unspecified.
+// four matrices at once (the polynomial iteration of docs/physics.md (1.17), else the
+// packed scaled Newton iteration); the latter returns its iteration count, or 0 when it
+// leaves the lanes to the former (a (nearly) singular F, or no convergence), R then
+// unspecified. schulz_rotation_blocked is the polynomial iteration alone (0: a lane
+// outside its basin or not converged).
 Mat3 polar_rotation(const Mat3& F);
 int polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]);
+int schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]);
+// ln a of the neo-Hookean blocked loop (packed), a in [1e-300, 1e300].
+void log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::block_width]);
 }  // namespace detail
 
 }  // namespace palpate

@@ -3,10 +3,13 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
+#include <vector>
 
 #include "core/kernel.h"
 #include "core/mls_forces.h"
@@ -360,8 +363,54 @@ TEST(Corotational, VectorisedPolarDecompositionMatchesTheExactOne) {
   EXPECT_EQ(fallbacks, 0) << "of " << blocks << " blocks";
 }
 
-// At the strains of a contact problem the blocked polar decomposition takes few
-// iterations (the benchmark's flop count depends on it).
+// The blocked loop's first choice, the polynomial iteration (docs/physics.md (1.17)),
+// against an independent truth: R = U V^T from Eigen's JacobiSVD F = U S V^T (S >= 0, so
+// U V^T is the orthogonal polar factor, a reflection when det F < 0). Random rotations
+// (any angle) times stretches inside its basin (singular values 0.5-1.2, with and without
+// an inversion, two equal ones): it must converge, to 1e-14, with R^T F symmetric; and a
+// stretch outside the basin (a singular value 1.6 or 0.001) must be left to the fallback (0),
+// which then gives the same factor.
+TEST(Corotational, NewtonSchulzRotationMatchesTheSvdPolarFactor) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> unit(-1, 1), stretch(0.5, 1.2);
+  auto random_rotation = [&] {
+    return Mat3(Eigen::AngleAxisd(M_PI * (0.5 + 0.5 * unit(rng)), Vec3(unit(rng), unit(rng), unit(rng)).normalized()));
+  };
+  auto svd_polar = [](const Mat3& F) {
+    const Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    return Mat3(svd.matrixU() * svd.matrixV().transpose());
+  };
+  for (int kind = 0; kind < 3; ++kind)
+    for (int trial = 0; trial < 300; ++trial) {
+      Mat3 F[Model::block_width], R[Model::block_width];
+      for (Mat3& Fl : F) {
+        Vec3 sigma(stretch(rng), stretch(rng), stretch(rng));
+        if (kind == 1) sigma[0] = -sigma[0];  // inverted
+        if (kind == 2) sigma[1] = sigma[2];   // a repeated singular value
+        Fl = random_rotation() * sigma.asDiagonal() * random_rotation();
+      }
+      const int iterations = detail::schulz_rotation_blocked(F, R);
+      ASSERT_GE(iterations, 1) << "kind " << kind;
+      for (int l = 0; l < Model::block_width; ++l) {
+        ASSERT_LT((R[l] - svd_polar(F[l])).cwiseAbs().maxCoeff(), 1e-14) << "kind " << kind << "\n" << F[l];
+        const Mat3 U = R[l].transpose() * F[l];
+        ASSERT_LT((U - U.transpose()).cwiseAbs().maxCoeff(), 1e-14);
+      }
+    }
+  for (double outside : {1.6, 0.001}) {
+    Mat3 F[Model::block_width], R[Model::block_width];
+    for (Mat3& Fl : F) Fl = random_rotation() * Vec3(1.0, 1.1, 0.9).asDiagonal() * random_rotation();
+    F[2] = random_rotation() * Vec3(outside, 1.0, 0.9).asDiagonal() * random_rotation();
+    EXPECT_EQ(detail::schulz_rotation_blocked(F, R), 0) << outside;
+    ASSERT_GE(detail::polar_rotation_blocked(F, R), 1) << outside;
+    for (int l = 0; l < Model::block_width; ++l)
+      EXPECT_LT((R[l] - svd_polar(F[l])).cwiseAbs().maxCoeff(), 1e-13) << outside;
+  }
+}
+
+// At the strains of a contact problem the blocked rotation is the polynomial iteration
+// (1.17) and takes few iterations (the benchmark's flop count depends on it): singular
+// values within about 0.7-1.3, at most 4.
 TEST(Corotational, VectorisedPolarDecompositionIterationsAtTissueStrains) {
   std::mt19937 rng(9);
   std::uniform_real_distribution<double> unit(-1, 1);
@@ -370,10 +419,40 @@ TEST(Corotational, VectorisedPolarDecompositionIterationsAtTissueStrains) {
     for (Mat3& Fl : F)
       Fl = Mat3(Eigen::AngleAxisd(M_PI * unit(rng), Vec3(unit(rng), unit(rng), unit(rng)).normalized())) *
            (Mat3::Identity() + 0.1 * Mat3::Random());
-    const int iterations = detail::polar_rotation_blocked(F, R);
+    const int iterations = detail::schulz_rotation_blocked(F, R);
     EXPECT_GE(iterations, 1);
-    EXPECT_LE(iterations, 6);
+    EXPECT_LE(iterations, 4);
   }
+}
+
+// The neo-Hookean loop's packed logarithm against std::log: J near 1 (tissue strains, down
+// to |J - 1| = 1e-12, and J = 1 exactly), over [1e-300, 1e300], and at the reduction's
+// seams (powers of 2 and 2^(k + 1/2)). Within 3 units of rounding of the larger of |ln J|
+// and 1e-300.
+TEST(NeoHookean, PackedLogarithmMatchesStdLog) {
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> near(-0.5, 0.5), exponent(-690.0, 690.0), tiny(-12.0, -1.0);
+  std::vector<double> values = {1.0, 2.0, 0.5, std::sqrt(2.0), std::sqrt(0.5), 1e-300, 1e300, 4.0 * std::sqrt(2.0),
+                                std::nextafter(std::sqrt(2.0), 0.0), std::nextafter(1.0, 2.0), std::nextafter(1.0, 0.0)};
+  for (int trial = 0; trial < 4000; ++trial) {
+    values.push_back(1.0 + near(rng));
+    values.push_back(std::exp(exponent(rng)));
+    values.push_back(1.0 + (trial % 2 ? 1 : -1) * std::pow(10.0, tiny(rng)));
+  }
+  while (values.size() % Model::block_width) values.push_back(1.0);
+  for (size_t k = 0; k < values.size(); k += Model::block_width) {
+    double a[Model::block_width], log_a[Model::block_width];
+    for (int l = 0; l < Model::block_width; ++l) a[l] = values[k + l];
+    detail::log_blocked(a, log_a);
+    for (int l = 0; l < Model::block_width; ++l) {
+      const double exact = std::log(a[l]);
+      ASSERT_LE(std::abs(log_a[l] - exact), 3 * std::numeric_limits<double>::epsilon() * std::max(std::abs(exact), 1e-300))
+          << a[l];
+    }
+  }
+  double one[Model::block_width] = {1, 1, 1, 1}, log_one[Model::block_width];
+  detail::log_blocked(one, log_one);
+  for (double v : log_one) EXPECT_EQ(v, 0.0);
 }
 
 // The small-strain linear law (material.law "linear"): the continuum of the linear hex
