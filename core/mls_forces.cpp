@@ -947,9 +947,9 @@ void count_polar_iterations(const Model& m, const double* x, double& schulz_iter
   };
   auto count = [&](auto& F, auto& R, int lanes) {
     int spent = 0, scaled = 0;
-    schulz_rotation_lanes(F, R, &spent);
+    const int converged_after = schulz_rotation_lanes(F, R, &spent);
     schulz_iterations += lanes * spent;
-    if (schulz_rotation_lanes(F, R) == 0) {
+    if (converged_after == 0) {
       newton_iterations += lanes * polar_rotation_lanes(F, R, &scaled);
       scaled_iterations += lanes * scaled;
     }
