@@ -96,7 +96,8 @@ ContactStiffness::ContactStiffness(const Model& model, ContactStiffnessSettings 
   geometric_.reserve(n);
   multiplier_.reserve(n);
   active_precond_.reserve(n);
-  for (Points* p : {&u_p_, &Ku_, &b_, &r_, &z_, &p_, &Ap_, &df_}) p->setZero(3, n);
+  for (Points* p : {u_p_, b_, r_, z_, p_, Ap_, df_})
+    for (int j = 0; j < 3; ++j) p[j].setZero(3, n);
   for (Points& p : response_) p.setZero(3, n);
   multiplier_response_.setZero(n, 3);
 }
@@ -115,13 +116,17 @@ void ContactStiffness::project(Points& w) const {
   }
 }
 
-void ContactStiffness::apply_operator(const Model& model, const Points& w, Points& out) {
-  // (2.10): P (K_b - G) P w for w in the admissible subspace. elastic_force_differential
+void ContactStiffness::apply_operator(const Model& model, int count, const Points* const* w, Points* const* out) {
+  // (2.10): P (K_b - G) P w for w in the admissible subspace. elastic_force_differentials
   // gives -K_b w; G acts at the active particles only, where w is tangential.
-  elastic_force_differential(model, tangent_, w, df_);
-  out = -df_;
-  for (size_t a = 0; a < active_.size(); ++a) out.col(active_[a]) -= geometric_[a] * w.col(active_[a]);
-  project(out);
+  Points* df[3] = {&df_[0], &df_[1], &df_[2]};
+  elastic_force_differentials(model, tangent_, count, w, df);
+  for (int q = 0; q < count; ++q) {
+    Points& o = *out[q];
+    o = -df_[q];
+    for (size_t a = 0; a < active_.size(); ++a) o.col(active_[a]) -= geometric_[a] * w[q]->col(active_[a]);
+    project(o);
+  }
 }
 
 void ContactStiffness::precondition(const Points& r, Points& z) const {
@@ -129,47 +134,82 @@ void ContactStiffness::precondition(const Points& r, Points& z) const {
   for (size_t a = 0; a < active_.size(); ++a) z.col(active_[a]) = active_precond_[a] * r.col(active_[a]);
 }
 
-int ContactStiffness::solve(const Model& model, const Points& b, Points& w, bool& converged) {
-  // Preconditioned CG on the admissible subspace (2.10); w comes in as the warm start.
-  const double b_norm = b.norm();
-  converged = true;
-  if (b_norm == 0.0) {
-    w.setZero();
-    return 0;
-  }
-  const double target = settings_.tolerance * b_norm;
-  project(w);
-  apply_operator(model, w, Ap_);
-  r_ = b - Ap_;
-  if (r_.norm() >= b_norm) {  // the warm start is worse than none
-    w.setZero();
-    r_ = b;
-  }
-  precondition(r_, z_);
-  p_ = z_;
-  double rz = (r_.array() * z_.array()).sum();
-  int iterations = 0;
-  while (r_.norm() > target) {
-    if (iterations == settings_.max_iterations) {
-      converged = false;
-      break;
+void ContactStiffness::solve(const Model& model, int& iterations, bool& converged) {
+  // Preconditioned CG on the admissible subspace (2.10), one per direction j, in lockstep;
+  // response_[j] comes in as the warm start.
+  double b_norm[3], target[3], rz[3];
+  bool running[3];
+  int iterations_of[3] = {0, 0, 0};
+  const Points* in[3];
+  Points* out[3];
+  int count = 0;
+  int index[3];
+  for (int j = 0; j < 3; ++j) {
+    b_norm[j] = b_[j].norm();
+    running[j] = b_norm[j] != 0.0;
+    if (!running[j]) {
+      response_[j].setZero();
+      continue;
     }
-    apply_operator(model, p_, Ap_);
-    const double pAp = (p_.array() * Ap_.array()).sum();
-    ++iterations;
-    if (!(pAp > 0.0)) {  // K_b - G is not positive on the subspace: no stable equilibrium to linearise
-      converged = false;
-      break;
-    }
-    const double alpha = rz / pAp;
-    w += alpha * p_;
-    r_ -= alpha * Ap_;
-    precondition(r_, z_);
-    const double rz_next = (r_.array() * z_.array()).sum();
-    p_ = z_ + (rz_next / rz) * p_;
-    rz = rz_next;
+    target[j] = settings_.tolerance * b_norm[j];
+    project(response_[j]);
+    in[count] = &response_[j];
+    out[count] = &Ap_[j];
+    ++count;
   }
-  return iterations;
+  apply_operator(model, count, in, out);
+  for (int j = 0; j < 3; ++j) {
+    if (!running[j]) continue;
+    r_[j] = b_[j] - Ap_[j];
+    if (r_[j].norm() >= b_norm[j]) {  // the warm start is worse than none
+      response_[j].setZero();
+      r_[j] = b_[j];
+    }
+    precondition(r_[j], z_[j]);
+    p_[j] = z_[j];
+    rz[j] = (r_[j].array() * z_[j].array()).sum();
+  }
+  for (;;) {
+    // The directions that iterate once more: not converged, not stopped.
+    count = 0;
+    for (int j = 0; j < 3; ++j) {
+      if (!running[j]) continue;
+      if (!(r_[j].norm() > target[j])) {
+        running[j] = false;
+        continue;
+      }
+      if (iterations_of[j] == settings_.max_iterations) {
+        converged = false;
+        running[j] = false;
+        continue;
+      }
+      index[count] = j;
+      in[count] = &p_[j];
+      out[count] = &Ap_[j];
+      ++count;
+    }
+    if (count == 0) break;
+    apply_operator(model, count, in, out);
+    for (int q = 0; q < count; ++q) {
+      const int j = index[q];
+      Points &w = response_[j], &r = r_[j], &z = z_[j], &p = p_[j], &Ap = Ap_[j];
+      const double pAp = (p.array() * Ap.array()).sum();
+      ++iterations_of[j];
+      if (!(pAp > 0.0)) {  // K_b - G is not positive on the subspace: no stable equilibrium to linearise
+        converged = false;
+        running[j] = false;
+        continue;
+      }
+      const double alpha = rz[j] / pAp;
+      w += alpha * p;
+      r -= alpha * Ap;
+      precondition(r, z);
+      const double rz_next = (r.array() * z.array()).sum();
+      p = z + (rz_next / rz[j]) * p;
+      rz[j] = rz_next;
+    }
+  }
+  for (int j = 0; j < 3; ++j) iterations += iterations_of[j];
 }
 
 LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedState& state) {
@@ -243,32 +283,44 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
   }
 
   linearize_elastic(model, state.position, tangent_);
+  // u_p (2.10): the prescribed normal displacement (n_a . e_j) n_a at the active particles (2.7).
   for (int j = 0; j < 3; ++j) {
     const Vec3 e = Vec3::Unit(j);
-    // u_p (2.10): the prescribed normal displacement (n_a . e) n_a at the active particles (2.7).
-    u_p_.setZero();
-    for (int a = 0; a < m; ++a) u_p_.col(active_[a]) = normal_.col(a).dot(e) * normal_.col(a);
-    elastic_force_differential(model, tangent_, u_p_, df_);
-    Ku_ = -df_;  // K_b u_p
+    u_p_[j].setZero();
+    for (int a = 0; a < m; ++a) u_p_[j].col(active_[a]) = normal_.col(a).dot(e) * normal_.col(a);
+  }
+  {
+    const Points* in[3] = {&u_p_[0], &u_p_[1], &u_p_[2]};
+    Points* df[3] = {&df_[0], &df_[1], &df_[2]};
+    elastic_force_differentials(model, tangent_, 3, in, df);  // -K_b u_p
+  }
+  for (int j = 0; j < 3; ++j) {
+    const Vec3 e = Vec3::Unit(j);
     // b = -P K_b u_p - G dc (2.10); G dc is tangential at the active particles.
-    b_ = -Ku_;
+    b_[j] = df_[j];
     for (int a = 0; a < m; ++a) {
       const Vec3 nrm = normal_.col(a);
-      b_.col(active_[a]) -= geometric_[a] * (e - nrm.dot(e) * nrm);
+      b_[j].col(active_[a]) -= geometric_[a] * (e - nrm.dot(e) * nrm);
     }
-    project(b_);
-    Points& dx = response_[j];  // holds the previous call's dx/dc_j: P of it is the warm start
-    bool converged = true;
-    out.cg_iterations += solve(model, b_, dx, converged);
-    out.converged = out.converged && converged;
-    dx += u_p_;
+    project(b_[j]);
+  }
+  // response_[j] holds the previous call's dx/dc_j: P of it is the warm start.
+  solve(model, out.cg_iterations, out.converged);
+  for (int j = 0; j < 3; ++j) response_[j] += u_p_[j];
+  {
+    const Points* in[3] = {&response_[0], &response_[1], &response_[2]};
+    Points* df[3] = {&df_[0], &df_[1], &df_[2]};
+    elastic_force_differentials(model, tangent_, 3, in, df);  // -K_b dx
+  }
+  for (int j = 0; j < 3; ++j) {
+    const Vec3 e = Vec3::Unit(j);
+    const Points& dx = response_[j];
     // The reactions (2.11) and the change of the force on the tool (2.12).
-    elastic_force_differential(model, tangent_, dx, df_);  // -K_b dx
     Vec3 dF = Vec3::Zero();
     for (int a = 0; a < m; ++a) {
       const int i = active_[a];
       const Vec3 nrm = normal_.col(a);
-      const double dmu = -nrm.dot(df_.col(i));
+      const double dmu = -nrm.dot(df_[j].col(i));
       multiplier_response_(a, j) = dmu;
       const Vec3 rel = dx.col(i) - e;  // r_a dn_a = (I - n n^T)(dx_a - dc) (2.9)
       dF -= dmu * nrm + geometric_[a] * (rel - nrm.dot(rel) * nrm);

@@ -12,7 +12,8 @@
 // multipliers at the active particles being the only new loads, with the stiffness of
 // the normals' rotation (2.9). The particles' displacement solves a symmetric system on
 // the subspace of admissible displacements (2.10), by projected conjugate gradients:
-// three solves (dc = e_x, e_y, e_z), each warm-started from the previous call's. The
+// three solves (dc = e_x, e_y, e_z), each warm-started from the previous call's, run in
+// lockstep so that one sweep of the tangent (elastic_force_differentials) serves all three. The
 // reactions (2.11) and the normals' rotation give dF (2.12); K is symmetric (2.13). The
 // validity radius (2.14), (2.15) is how far the tool may move before the active set
 // changes, to first order.
@@ -96,10 +97,14 @@ class ContactStiffness {
   Vec3 multiplier_response(int a) const { return multiplier_response_.row(a).transpose(); }
 
  private:
-  void apply_operator(const Model& model, const Points& w, Points& out);  // out = P (K_b - G) P w (2.10)
+  // out[q] = P (K_b - G) P w[q] (2.10) for q < count, the tangent products in one sweep.
+  void apply_operator(const Model& model, int count, const Points* const* w, Points* const* out);
   void precondition(const Points& r, Points& z) const;                    // z = P D^-1 P r
   void project(Points& w) const;                                          // w <- P w
-  int solve(const Model& model, const Points& b, Points& w, bool& converged);
+  // The three projected CGs of (2.10), b_[j] -> response_[j] (which holds the warm start), in
+  // lockstep: each its own alpha, beta and stopping test, the products of the directions still
+  // iterating in one call. Adds each direction's iterations to `iterations`.
+  void solve(const Model& model, int& iterations, bool& converged);
 
   int n_ = 0;
   ContactStiffnessSettings settings_;
@@ -115,7 +120,7 @@ class ContactStiffness {
   std::vector<double> geometric_;       // mu_a / |x_a - c|, N/m: the normal rotation's stiffness (2.8)
   std::vector<Mat3> active_precond_;    // projected inverse blocks at the active particles
   // Scratch of the solves.
-  Points u_p_, Ku_, b_, r_, z_, p_, Ap_, df_;
+  Points u_p_[3], b_[3], r_[3], z_[3], p_[3], Ap_[3], df_[3];  // per direction dc = e_j
   Points response_[3];  // dx/dc_j of the last call, the warm starts
   Eigen::Matrix<double, Eigen::Dynamic, 3> multiplier_response_;
 };

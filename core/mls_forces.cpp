@@ -127,16 +127,29 @@ inline double corotational_stress(const Mat3& F, double lambda, double mu, Mat3&
 // Its differential along dF: with A = R^T dF and U = R^T F, dR = R [w]x where
 // (tr U I - U) w = (A32 - A23, A13 - A31, A21 - A12); then
 // dP = 2 mu (dF - dR) + lambda tr(A) R + lambda (tr U - 3) dR.
-inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& dF, double lambda, double mu) {
-  const Mat3 A = R.transpose() * dF;
+// The parts of it that depend on (F, R) only, shared by several dF (the multi-right-hand-side
+// product): tr U and (tr U I - U)^-1.
+struct CorotationalTangent {
+  double trace_U;
+  Mat3 K_inverse;
+};
+inline CorotationalTangent corotational_tangent(const Mat3& F, const Mat3& R) {
   const Mat3 U = R.transpose() * F;
   Mat3 K = -U;
   K.diagonal().array() += U.trace();
-  const Vec3 w = K.inverse() * Vec3(A(2, 1) - A(1, 2), A(0, 2) - A(2, 0), A(1, 0) - A(0, 1));
+  return {U.trace(), K.inverse()};
+}
+inline Mat3 corotational_differential(const CorotationalTangent& t, const Mat3& R, const Mat3& dF, double lambda,
+                                      double mu) {
+  const Mat3 A = R.transpose() * dF;
+  const Vec3 w = t.K_inverse * Vec3(A(2, 1) - A(1, 2), A(0, 2) - A(2, 0), A(1, 0) - A(0, 1));
   Mat3 W;
   W << 0, -w[2], w[1], w[2], 0, -w[0], -w[1], w[0], 0;
   const Mat3 dR = R * W;
-  return (2 * mu) * (dF - dR) + (lambda * A.trace()) * R + (lambda * (U.trace() - 3.0)) * dR;
+  return (2 * mu) * (dF - dR) + (lambda * A.trace()) * R + (lambda * (t.trace_U - 3.0)) * dR;
+}
+inline Mat3 corotational_differential(const Mat3& F, const Mat3& R, const Mat3& dF, double lambda, double mu) {
+  return corotational_differential(corotational_tangent(F, R), R, dF, lambda, mu);
 }
 
 // Differential of the volume term's stress k_v (J - 1) cof F along dF:
@@ -842,6 +855,77 @@ PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
 
+// The corotational law's tangent at (F_i, R_i), packed, for K directions dF[0..K) at once:
+// tr U and (tr U I - U)^-1 (U = R^T F; the inverse as cof^T / det) formed once per block,
+// then per direction A = R^T dF, (tr U I - U) w = (A32 - A23, A13 - A31, A21 - A12),
+// dR = R [w]x, dP = 2 mu (dF - dR) + lambda tr(A) R + lambda (tr U - 3) dR (+ the volume
+// term's), as corotational_differential one lane at a time (the same to round-off).
+template <bool volume_term, int K>
+PALPATE_INLINE void weighted_corotational_differentials(const Model& m, const Mat3Lanes& F, const Mat3Lanes& R,
+                                                        const Mat3Lanes (&dF)[K], const Lanes v, const Lanes lambda,
+                                                        const Lanes mu, Mat3Lanes (&vdP)[K]) {
+  Mat3Lanes T;  // tr U I - U
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r)
+    PALPATE_UNROLL
+    for (int c = 0; c < 3; ++c) T(r, c) = -(R(0, r) * F(0, c) + R(1, r) * F(1, c) + R(2, r) * F(2, c));
+  const Lanes trace_U = -(T(0, 0) + T(1, 1) + T(2, 2));
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r) T(r, r) += trace_U;
+  Mat3Lanes C;  // cof T; T^-1 = C^T / det T
+  cofactor_lanes(T, C);
+  const Lanes inverse_det = 1.0 / (T(0, 0) * C(0, 0) + T(1, 0) * C(1, 0) + T(2, 0) * C(2, 0));
+  Mat3Lanes T_inverse;
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r)
+    PALPATE_UNROLL
+    for (int c = 0; c < 3; ++c) T_inverse(r, c) = C(c, r) * inverse_det;
+  const Lanes two_mu = 2 * mu, lambda_rotation = lambda * (trace_U - 3.0);
+  PALPATE_UNROLL
+  for (int q = 0; q < K; ++q) {
+    Mat3Lanes A;  // R^T dF
+    PALPATE_UNROLL
+    for (int r = 0; r < 3; ++r)
+      PALPATE_UNROLL
+      for (int c = 0; c < 3; ++c) A(r, c) = R(0, r) * dF[q](0, c) + R(1, r) * dF[q](1, c) + R(2, r) * dF[q](2, c);
+    const Lanes a0 = A(2, 1) - A(1, 2), a1 = A(0, 2) - A(2, 0), a2 = A(1, 0) - A(0, 1);
+    Lanes w[3];
+    PALPATE_UNROLL
+    for (int r = 0; r < 3; ++r) w[r] = T_inverse(r, 0) * a0 + T_inverse(r, 1) * a1 + T_inverse(r, 2) * a2;
+    const Lanes lambda_trace_A = lambda * (A(0, 0) + A(1, 1) + A(2, 2));
+    Mat3Lanes dP;
+    PALPATE_UNROLL
+    for (int r = 0; r < 3; ++r) {
+      const Lanes dR0 = R(r, 1) * w[2] - R(r, 2) * w[1];
+      const Lanes dR1 = R(r, 2) * w[0] - R(r, 0) * w[2];
+      const Lanes dR2 = R(r, 0) * w[1] - R(r, 1) * w[0];
+      dP(r, 0) = two_mu * (dF[q](r, 0) - dR0) + lambda_trace_A * R(r, 0) + lambda_rotation * dR0;
+      dP(r, 1) = two_mu * (dF[q](r, 1) - dR1) + lambda_trace_A * R(r, 1) + lambda_rotation * dR1;
+      dP(r, 2) = two_mu * (dF[q](r, 2) - dR2) + lambda_trace_A * R(r, 2) + lambda_rotation * dR2;
+    }
+    if constexpr (volume_term) add_volume_term_differential(m, F, dF[q], dP);
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) vdP[q].m[k] = v * dP.m[k];
+  }
+}
+
+// The linear law's v_i dP_i = v_i [mu (dF + dF^T) + lambda tr(dF) I] (+ the volume term's), packed.
+template <bool volume_term>
+PALPATE_INLINE void weighted_linear_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& dF, const Lanes v,
+                                                 const Lanes lambda, const Lanes mu, Mat3Lanes& vdP) {
+  Mat3Lanes dP;
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r)
+    PALPATE_UNROLL
+    for (int c = 0; c < 3; ++c) dP(r, c) = mu * (dF(r, c) + dF(c, r));
+  const Lanes lambda_trace = lambda * (dF(0, 0) + dF(1, 1) + dF(2, 2));
+  PALPATE_UNROLL
+  for (int r = 0; r < 3; ++r) dP(r, r) += lambda_trace;
+  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
+  PALPATE_UNROLL
+  for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
+}
+
 // The force loop over G blocks at a time: F of each, their stresses v_i P_i, the
 // forces. G = 2 for the corotational law (its polar iterations interleave).
 template <bool volume_term, int G>
@@ -916,6 +1000,46 @@ void force_differential_blocked(const Model& m, int b_begin, int b_end, const do
     else
       weighted_piola_differential<volume_term>(m, F, S, dF, v, lambda, mu, vdP);
     scatter_forces(block, begin, end, vdP, i, std::min(kLanes, n - kLanes * b), df);
+  }
+}
+
+// force_differential_blocked for K directions in one sweep over the blocks: per block the
+// tangent's F, S (R, F^-T) and the Lame parameters gathered once, the K gradients dF and
+// scatters over the same slots, the laws' per-lane work shared where it can be (the
+// corotational rotation's linear system). Each direction's arithmetic is that of
+// force_differential_blocked, in the same order.
+template <bool volume_term, int K>
+void force_differentials_blocked(const Model& m, int b_begin, int b_end, const double* tangent_F,
+                                 const double* tangent_S_or_R, const double* const* dx, double* const* df) {
+  const int n = m.particle_count;
+  for (int b = b_begin; b < b_end; ++b) {
+    const Block& block = m.blocks[b];
+    const Slot* begin = m.block_slots.data() + block.slot_begin;
+    const Slot* end = m.block_slots.data() + block.slot_end;
+    int i[kLanes];
+    block_particles(b, n, i);
+    Mat3Lanes dF[K] = {};
+    PALPATE_UNROLL
+    for (int q = 0; q < K; ++q) add_gradient(begin, end, dx[q], i, dF[q]);
+    Mat3Lanes F, S, vdP[K];
+    gather_matrices(tangent_F, i, F);
+    gather_matrices(tangent_S_or_R, i, S);
+    const Lanes v = load(block.volume), lambda = load(block.lame_lambda), mu = load(block.lame_mu);
+    if (m.law == MaterialLaw::neo_hookean) {
+      PALPATE_UNROLL
+      for (int q = 0; q < K; ++q) weighted_neo_hookean_differential<volume_term>(m, F, S, dF[q], v, lambda, mu, vdP[q]);
+    } else if (m.law == MaterialLaw::corotational) {  // S holds R
+      weighted_corotational_differentials<volume_term, K>(m, F, S, dF, v, lambda, mu, vdP);
+    } else if (m.law == MaterialLaw::linear) {
+      PALPATE_UNROLL
+      for (int q = 0; q < K; ++q) weighted_linear_differential<volume_term>(m, F, dF[q], v, lambda, mu, vdP[q]);
+    } else {
+      PALPATE_UNROLL
+      for (int q = 0; q < K; ++q) weighted_piola_differential<volume_term>(m, F, S, dF[q], v, lambda, mu, vdP[q]);
+    }
+    const int lanes = std::min(kLanes, n - kLanes * b);
+    PALPATE_UNROLL
+    for (int q = 0; q < K; ++q) scatter_forces(block, begin, end, vdP[q], i, lanes, df[q]);
   }
 }
 
@@ -1166,6 +1290,38 @@ void mls_force_differential(const Model& m, const std::vector<double>& tangent_F
     else
       force_differential_blocked<false>(m, b_begin, b_end, tangent_F.data(), tangent_S_or_R.data(), dx.data(), out);
   });
+}
+
+void mls_force_differentials(const Model& m, const std::vector<double>& tangent_F,
+                             const std::vector<double>& tangent_S_or_R, int count, const Points* const* dx,
+                             Points* const* df) {
+  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
+  assert(count >= 0 && count <= kMaxDifferentials);
+  if (count == 0) return;
+  if (!use_blocks(m)) {  // the per-particle reference loop (hourglass control): one product after the other
+    for (int q = 0; q < count; ++q) mls_force_differential(m, tangent_F, tangent_S_or_R, *dx[q], *df[q]);
+    return;
+  }
+  const double* in[kMaxDifferentials];
+  double* out[kMaxDifferentials];
+  for (int q = 0; q < count; ++q) {
+    df[q]->setZero();
+    in[q] = dx[q]->data();
+    out[q] = df[q]->data();
+  }
+  const int blocks = static_cast<int>(m.blocks.size());
+  const double *F = tangent_F.data(), *S = tangent_S_or_R.data();
+  auto run = [&]<bool volume_term>() {
+    switch (count) {
+      case 1: force_differentials_blocked<volume_term, 1>(m, 0, blocks, F, S, in, out); break;
+      case 2: force_differentials_blocked<volume_term, 2>(m, 0, blocks, F, S, in, out); break;
+      default: force_differentials_blocked<volume_term, 3>(m, 0, blocks, F, S, in, out); break;
+    }
+  };
+  if (m.volume_stiffness > 0)
+    run.template operator()<true>();
+  else
+    run.template operator()<false>();
 }
 
 double mls_internal_forces_flops(const Model& m, const Points& x) {

@@ -56,6 +56,17 @@ void mls_force_differential(const Model& model, const std::vector<double>& tange
                             const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df,
                             WorkerThreads& threads);
 
+// The tangent product for up to kMaxDifferentials directions in one sweep over the neighbour
+// pairs: df[q] = (df/dx) dx[q] (= -K dx[q]), q < count, each equal to mls_force_differential's
+// (the same arithmetic per direction; the tangent's F_i, S_i or R_i, the weights and, for the
+// corotational law, its rotation's linear system gathered or formed once for all of them).
+// On the calling thread; without the blocked loops (hourglass control) one product after the
+// other. dx[q] and df[q] must be distinct arrays, 3 x n.
+inline constexpr int kMaxDifferentials = 3;
+void mls_force_differentials(const Model& model, const std::vector<double>& tangent_F,
+                             const std::vector<double>& tangent_S_or_R, int count, const Points* const* dx,
+                             Points* const* df);
+
 // Floating-point operations of one mls_internal_forces call at positions x (for the
 // benchmark's GFLOP/s), counted by hand from the blocked loop of the model's law; for the
 // corotational law the polar iterations at x are counted by running them.

@@ -19,5 +19,11 @@ double elastic_energy(const Model& model, const Points& x);
 // then df = (df/dx) dx = -K dx. Both on work.threads (MLS; the hex FEM on the calling thread).
 void linearize_elastic(const Model& model, const Points& x, Workspace& work);
 void elastic_force_differential(const Model& model, Workspace& work, const Points& dx, Points& df);
+// The same for `count` directions (at most 3: mls_forces.h kMaxDifferentials), df[q] = -K dx[q],
+// each equal to elastic_force_differential's. MLS on one thread (work.threads.count() == 1): one
+// sweep over the neighbour pairs for all of them (mls_force_differentials); otherwise, and for
+// the hex FEM, one product after the other.
+void elastic_force_differentials(const Model& model, Workspace& work, int count, const Points* const* dx,
+                                 Points* const* df);
 
 }  // namespace palpate
