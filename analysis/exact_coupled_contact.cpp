@@ -7,52 +7,25 @@
 #include "core/contact.h"
 #include "core/health.h"
 #include "core/integrators.h"
+#include "core/step.h"
 
 namespace palpate {
 
 StepStatus solve_contact_exact_delassus(const Model& model, const Options& opt, State& state) {
   Workspace& work = state.work;
   const int n = model.particle_count;
-  const double R = model.indenter_radius;
   const double dt = opt.integrator.dt;
-  const Vec3 c = state.indenter_center;
   const double tolerance = opt.contact.tolerance;
   const int max_iterations = opt.contact.max_iterations;
-  std::vector<int>& candidate = state.out.contact_candidate;
+  const std::vector<int>& candidate = state.out.contact_candidate;
 
-  // Candidates: free particles inside the sphere after the free motion, and those in
-  // contact at the previous step, whose forces p the free motion carried.
-  std::vector<double> gap, previous;
-  Points normal(3, n), previous_force(3, n);
-  std::vector<int> slot(n, -1);
-  candidate.clear();
-  auto add_candidate = [&](int i) {
-    const Vec3 r = state.position.col(i) - c;
-    const double dist = r.norm();
-    const int a = static_cast<int>(candidate.size());
-    candidate.push_back(i);
-    gap.push_back(dist - R);
-    normal.col(a) = dist > 0 ? Vec3(r / dist) : Vec3(0, 0, -1);
-    previous.push_back(0.0);
-    previous_force.col(a).setZero();
-    slot[i] = a;
-  };
-  for (int i = 0; i < n; ++i)
-    if (model.inverse_mass[i] != 0.0 && (state.position.col(i) - c).squaredNorm() < R * R) add_candidate(i);
-  for (size_t k = 0; k < state.contact_index.size(); ++k) {
-    const int i = state.contact_index[k];
-    if (slot[i] < 0) add_candidate(i);
-    const int a = slot[i];
-    previous_force.col(a) = state.contact_force.col(static_cast<Eigen::Index>(k));
-    previous[a] = previous_force.col(a).dot(normal.col(a));
-  }
-  const int m = static_cast<int>(candidate.size());
-  state.contact_index.clear();
-  state.contact_normal_force.clear();
-  state.indenter_contact_force.setZero();
-  state.out.contact_iterations = 0;
-  state.out.contact_max_penetration = 0.0;
+  // The candidates, their gaps, normals and previous forces p: core's own first stage.
+  const int m = gather_contact_candidates(model, state);
   if (m == 0) return StepStatus::ok;
+  std::vector<double>& gap = work.gap;
+  const std::vector<double>& previous = work.previous_multiplier;
+  const Points& normal = work.normal;
+  const Points& previous_force = work.previous_force;
 
   // W_ab = dt^2 [n_a . r^(b)_a + n_a . P n_b / M], r^(b) = A^-1 (unit force n_b on particle b).
   const double dt2 = dt * dt;
@@ -125,13 +98,7 @@ StepStatus solve_contact_exact_delassus(const Model& model, const Options& opt, 
 
 StepStatus step_implicit_euler_exact(const Model& model, const Options& opt, State& state) {
   free_motion_implicit_euler(model, opt, state);
-  StepStatus status = solve_contact_exact_delassus(model, opt, state);
-  state.time += opt.integrator.dt;
-  ++state.tick;
-  if (opt.health.enabled) return check_health(model, opt, state, status);
-  if (!std::isfinite(state.position.sum() + state.indenter_center.sum() + state.indenter_velocity.sum()))
-    return StepStatus::non_finite;
-  return status;
+  return end_step(model, opt, state, solve_contact_exact_delassus(model, opt, state));
 }
 
 }  // namespace palpate

@@ -409,18 +409,12 @@ class CoupledContact {
 
 }  // namespace
 
-StepStatus solve_contact(const Model& model, const Options& opt, State& state, LinearResponse* coupled) {
+int gather_contact_candidates(const Model& model, State& state) {
   Workspace& work = state.work;
   const int n = model.particle_count;
   const double R = model.indenter_radius;
-  const double dt = opt.integrator.dt;
   const Vec3 c = state.indenter_center;
-  const double tolerance = opt.contact.tolerance;
-  const int max_iterations = opt.contact.max_iterations;
   std::vector<int>& candidate = state.out.contact_candidate;
-
-  // Candidates: free particles inside the sphere after the free motion, and the
-  // particles in contact at the previous step (their force was part of the free motion).
   candidate.clear();
   work.gap.clear();
   work.previous_multiplier.clear();
@@ -456,6 +450,16 @@ StepStatus solve_contact(const Model& model, const Options& opt, State& state, L
   state.out.contact_max_penetration = 0.0;
   state.out.contact_columns = state.out.contact_splitting_iterations = 0;
   state.out.contact_cg_solves = state.out.contact_cg_iterations = 0;
+  return m;
+}
+
+StepStatus solve_contact(const Model& model, const Options& opt, State& state, LinearResponse* coupled) {
+  Workspace& work = state.work;
+  const double dt = opt.integrator.dt;
+  const double tolerance = opt.contact.tolerance;
+  const int max_iterations = opt.contact.max_iterations;
+  const std::vector<int>& candidate = state.out.contact_candidate;
+  const int m = gather_contact_candidates(model, state);
   if (m == 0) return StepStatus::ok;
 
   // Delassus operator W = dt^2 J M^-1 J^T, the sphere's translations included:

@@ -36,6 +36,14 @@ class LinearResponse {
   virtual int solve(const Points& load, Points& out, double residual_norm) = 0;
 };
 
+// The first stage of solve_contact: the candidates (free particles inside the sphere after
+// the free motion, and those in contact at the previous step, whose forces the free motion
+// carried) into state.out.contact_candidate, with their free gaps (2.2), unit normals and
+// previous forces (vector, and multiplier along this step's normal) in state.work (gap,
+// normal, previous_force, previous_multiplier); clears the step's contact outputs. Returns
+// the number of candidates m.
+int gather_contact_candidates(const Model& model, State& state);
+
 // Solves and applies the contact of one step. With coupled == nullptr the
 // particles respond through their lumped inverse masses (explicit integrators); with the
 // step operator A of implicit Euler, through A^-1 (state.out counts its CG work). Returns

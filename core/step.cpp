@@ -27,6 +27,10 @@ StepStatus step(const Model& model, const Options& opt, State& state) {
       break;
     }
   }
+  return end_step(model, opt, state, status);
+}
+
+StepStatus end_step(const Model& model, const Options& opt, State& state, StepStatus status) {
   state.time += opt.integrator.dt;
   ++state.tick;
   if (opt.health.enabled) return check_health(model, opt, state, status);
