@@ -1,6 +1,7 @@
 #include "protocol/scene_wire.h"
 
 #include <capnp/compat/json.h>
+#include <capnp/dynamic.h>
 #include <capnp/message.h>
 #include <kj/exception.h>
 #include <nlohmann/json.hpp>
@@ -13,6 +14,64 @@ void configure(capnp::JsonCodec& codec) {
   codec.handleByAnnotation<wire::Scene>();    // snake_case names from $Json.name
   codec.setHasMode(capnp::HasMode::NON_DEFAULT);  // omit defaults: "absent" in the file format
   codec.setRejectUnknownFields(true);
+}
+
+// RFC 3629 UTF-8: no overlong forms, no surrogates, nothing above U+10FFFF.
+bool valid_utf8(kj::ArrayPtr<const char> text) {
+  const auto* s = reinterpret_cast<const unsigned char*>(text.begin());
+  const size_t n = text.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned char c = s[i];
+    if (c < 0x80) { ++i; continue; }
+    size_t len = 0;
+    unsigned char lo = 0x80, hi = 0xBF;  // the allowed range of the second byte
+    if (c >= 0xC2 && c <= 0xDF) len = 2;
+    else if (c >= 0xE0 && c <= 0xEF) { len = 3; if (c == 0xE0) lo = 0xA0; if (c == 0xED) hi = 0x9F; }
+    else if (c >= 0xF0 && c <= 0xF4) { len = 4; if (c == 0xF0) lo = 0x90; if (c == 0xF4) hi = 0x8F; }
+    else return false;
+    if (i + len > n || s[i + 1] < lo || s[i + 1] > hi) return false;
+    for (size_t k = 2; k < len; ++k)
+      if (s[i + k] < 0x80 || s[i + k] > 0xBF) return false;
+    i += len;
+  }
+  return true;
+}
+
+// The field's name in the scene file: its $Json.name, else its schema name.
+std::string json_field_name(capnp::StructSchema::Field field) {
+  constexpr uint64_t kJsonNameAnnotation = 0xfa5b1fd61c2e7c3dull;  // capnp/compat/json.capnp `name`
+  for (const auto annotation : field.getProto().getAnnotations())
+    if (annotation.getId() == kJsonNameAnnotation) return annotation.getValue().getText().cStr();
+  return field.getProto().getName().cStr();
+}
+
+// The JSON pointer of the first text in `value` that is not UTF-8 (empty if all are): the
+// codec copies text bytes verbatim, and JSON text must be UTF-8.
+std::string first_invalid_text(const capnp::DynamicValue::Reader& value, const std::string& pointer) {
+  switch (value.getType()) {
+    case capnp::DynamicValue::TEXT: {
+      const capnp::Text::Reader text = value.as<capnp::Text>();
+      return valid_utf8(text.asArray()) ? std::string() : pointer;
+    }
+    case capnp::DynamicValue::LIST: {
+      const auto list = value.as<capnp::DynamicList>();
+      for (unsigned i = 0; i < list.size(); ++i) {
+        std::string bad = first_invalid_text(list[i], pointer + "/" + std::to_string(i));
+        if (!bad.empty()) return bad;
+      }
+      return {};
+    }
+    case capnp::DynamicValue::STRUCT: {
+      const auto s = value.as<capnp::DynamicStruct>();
+      for (const capnp::StructSchema::Field field : s.getSchema().getFields()) {
+        if (!s.has(field)) continue;
+        std::string bad = first_invalid_text(s.get(field), pointer + "/" + json_field_name(field));
+        if (!bad.empty()) return bad;
+      }
+      return {};
+    }
+    default: return {};
+  }
 }
 
 nlohmann::json vec3_json(capnp::List<double>::Reader v) {
@@ -70,9 +129,17 @@ nlohmann::json fixed_region_json(wire::FixedRegion::Reader region) {
 }  // namespace
 
 std::string scene_to_json(wire::Scene::Reader scene) {
+  const std::string bad_text = first_invalid_text(capnp::DynamicStruct::Reader(scene), "");
+  if (!bad_text.empty()) throw SceneError("", bad_text, "the text is not valid UTF-8");
   capnp::JsonCodec codec;
   configure(codec);
-  nlohmann::json out = nlohmann::json::parse(codec.encode(scene).cStr());
+  const kj::String encoded = codec.encode(scene);
+  nlohmann::json out;
+  try {
+    out = nlohmann::json::parse(encoded.cStr());
+  } catch (const nlohmann::json::exception& e) {  // an internal error: the walk above checks all text
+    throw SceneError("", "", std::string("the encoded scene is not JSON: ") + e.what());
+  }
   if (scene.getMaterial().hasInclusions())
     out["material"]["inclusions"] = inclusions_json(scene.getMaterial().getInclusions());
   out.erase("fixed_regions");

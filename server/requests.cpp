@@ -242,6 +242,8 @@ OpenPlan plan_session(wire::OpenRequest::Reader request, const ServerOptions& op
       plan.kind = OpenPlan::SceneKind::inline_scene;
       try {  // as scene_from_wire does, with the same message
         plan.inline_json = scene_to_json(scene.getInlineScene());
+      } catch (const SceneError& e) {
+        fail(SceneError("<rpc scene>", e.field(), e.reason()).what());
       } catch (const kj::Exception& e) {
         fail(SceneError("<rpc scene>", "", std::string("cannot encode the scene: ") + e.getDescription().cStr()).what());
       }

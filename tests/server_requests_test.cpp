@@ -201,6 +201,24 @@ TEST_F(ServerRequests, PlanningASessionReadsNoFiles) {
   EXPECT_THROW(plan_session(bad, options_), kj::Exception);
 }
 
+// Every mistake in an inline scene reaches the client as an RPC error naming the field
+// (a fuzzer found bad UTF-8 escaping as a JSON library's exception).
+TEST_F(ServerRequests, InlineSceneMistakesAreRpcErrorsNamingTheField) {
+  EXPECT_NE(open_node_file("nodes\xe2x.txt").find("/body/distribution/node_file"), std::string::npos);
+  EXPECT_NE(open_node_file("nodes\xe2x.txt").find("UTF-8"), std::string::npos);
+  capnp::MallocMessageBuilder mb;
+  auto request = mb.initRoot<wire::OpenRequest>();
+  auto scene = request.getScene().initInlineScene();
+  scene.initFixedRegions(1)[0].initSphere().setRadius(0.1);  // regions, but `fixed` (the faces) null
+  try {
+    session_scene(request, options_);
+    FAIL() << "fixed regions without fixed faces were accepted";
+  } catch (const kj::Exception& e) {
+    EXPECT_NE(std::string(e.getDescription().cStr()).find("<rpc scene>: /fixed"), std::string::npos)
+        << e.getDescription().cStr();
+  }
+}
+
 TEST_F(ServerRequests, OverridesCannotPointANamedSceneElsewhere) {
   capnp::MallocMessageBuilder mb;
   auto request = mb.initRoot<wire::OpenRequest>();

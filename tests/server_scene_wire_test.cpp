@@ -130,6 +130,32 @@ TEST(SceneWire, MeshDistributionRoundTrips) {
   EXPECT_EQ(s.distribution.mesh_file.filename(), "cube_tet_small.msh");
 }
 
+// Text crosses the wire byte for byte; JSON text must be UTF-8. A client's bad bytes are
+// refused with the field's pointer, and every well-formed sequence passes.
+TEST(SceneWire, TextThatIsNotUtf8IsRefusedAtItsField) {
+  const auto error_of = [](const char* node_file, const char* group) -> std::string {
+    capnp::MallocMessageBuilder mb;
+    auto scene = mb.initRoot<wire::Scene>();
+    auto d = scene.initBody().initDistribution();
+    d.setType(wire::DistributionType::NODE_FILE);
+    d.setNodeFile(node_file);
+    if (group != nullptr) scene.getMaterial().initInclusions(2)[1].setGroup(group);
+    try {
+      scene_to_json(scene);
+    } catch (const SceneError& e) {
+      return e.field() + ": " + e.reason();
+    }
+    return "";
+  };
+  // Well-formed: ASCII, 2-, 3- and 4-byte sequences at the edges of their ranges.
+  for (const char* good : {"nodes.txt", "n\xc3\xb6" "des", "\xe0\xa0\x80\xed\x9f\xbf\xef\xbf\xbf", "\xf0\x90\x80\x80\xf4\x8f\xbf\xbf"})
+    EXPECT_EQ(error_of(good, "tumour"), "") << good;
+  // A truncated sequence, a lone continuation byte, overlong forms, a surrogate, beyond U+10FFFF.
+  for (const char* bad : {"\xe2" "ex_fe", "a\x80", "\xc0\xaf", "\xe0\x9f\xbf", "\xed\xa0\x80", "\xf4\x90\x80\x80", "\xc3"})
+    EXPECT_EQ(error_of(bad, nullptr), "/body/distribution/node_file: the text is not valid UTF-8") << bad;
+  EXPECT_EQ(error_of("nodes.txt", "\xff"), "/material/inclusions/1/group: the text is not valid UTF-8");
+}
+
 TEST(SceneWire, ErrorsNameTheField) {
   capnp::MallocMessageBuilder mb;
   auto scene = mb.initRoot<wire::Scene>();
