@@ -34,8 +34,11 @@ of the run's peak force), overall and per motion, and the wall time of both runs
                       the scene's integrator.dt)
   --seconds S         the path's duration, (0, 3600] (default 6)
   --depth M           press depth below first touch, m (default R/5)
+  --stiffness-lag N   also render with the contact stiffness of N coarse steps before
+                      the step rendered from, as a real-time session's worker lags it
+                      (repeatable; each adds a row per motion: "local, K N steps old")
   --csv FILE          write every render tick: t, motion, truth, multirate and hold forces
-                      (x y z, N), the model's age (s)
+                      (x y z, N), the model's age (s), the lagged renders (x y z, N)
   --json              print one JSON object instead of the table
   --help              print this text and exit
 Exit status: 0 when done; 1 when a run fails; 2 for a wrong argument.
@@ -72,6 +75,7 @@ int main(int argc, char** argv) {
       else if (arg == "--model-dt") config.model_dt = args.number(1e-9, 10);
       else if (arg == "--seconds") config.seconds = args.number(1e-9, 3600);
       else if (arg == "--depth") config.depth = args.number(1e-12, 1e3);
+      else if (arg == "--stiffness-lag") config.stiffness_lags.push_back(static_cast<int>(args.integer(0, 100000)));
       else if (arg == "--csv") csv = args.value();
       else if (arg == "--json") json_out = true;
       else if (args.help()) {
@@ -112,6 +116,17 @@ int main(int argc, char** argv) {
     local_by_age[a].push_back(el);
     hold_by_age[a].push_back(eh);
   }
+  // The same with the stiffness older (--stiffness-lag), per lag and motion.
+  const size_t lags = config.stiffness_lags.size();
+  std::vector<std::vector<std::vector<double>>> lagged(lags, std::vector<std::vector<double>>(kinds + 1));
+  for (const auto& s : r.samples) {
+    const int kind = static_cast<int>(r.segments[s.segment].motion);
+    for (size_t l = 0; l < lags; ++l) {
+      const double e = (s.lagged[l] - s.truth).norm();
+      lagged[l][kind].push_back(e);
+      lagged[l][kinds].push_back(e);
+    }
+  }
   const Stats age_stats = stats_of(ages);
   nlohmann::json j;
   j["scene"] = std::filesystem::path(config.scene_file).filename().string();
@@ -131,18 +146,29 @@ int main(int argc, char** argv) {
     const std::string name = k == kinds ? "all" : haptic::motion_name(static_cast<haptic::Motion>(k));
     j["error"][name] = {{"samples", local[k].size()}, {"local_model", row(local[k])}, {"hold", row(hold[k])}};
   }
+  for (size_t l = 0; l < lags; ++l)
+    for (int k = 0; k <= kinds; ++k)
+      if (!lagged[l][k].empty())
+        j["error_stiffness_lagged"][std::to_string(config.stiffness_lags[l])]
+         [k == kinds ? "all" : haptic::motion_name(static_cast<haptic::Motion>(k))] = row(lagged[l][k]);
   for (size_t a = 0; a < local_by_age.size(); ++a)
     j["error_by_model_age"].push_back({{"age_s", a * r.haptic_dt}, {"samples", local_by_age[a].size()},
                                        {"local_model", row(local_by_age[a])}, {"hold", row(hold_by_age[a])}});
 
   if (!csv.empty()) {
     std::ofstream out(csv);
-    out << "t,motion,truth_x,truth_y,truth_z,multirate_x,multirate_y,multirate_z,hold_x,hold_y,hold_z,model_age\n";
+    out << "t,motion,truth_x,truth_y,truth_z,multirate_x,multirate_y,multirate_z,hold_x,hold_y,hold_z,model_age";
+    for (const int lag : config.stiffness_lags)
+      for (const char* a : {"x", "y", "z"}) out << ",lag" << lag << '_' << a;
+    out << '\n';
     for (const auto& s : r.samples) {
       out << s.t << ',' << haptic::motion_name(r.segments[s.segment].motion);
       for (const Vec3* v : {&s.truth, &s.multirate, &s.hold})
         for (int a = 0; a < 3; ++a) out << ',' << (*v)[a];
-      out << ',' << s.model_age << '\n';
+      out << ',' << s.model_age;
+      for (const Vec3& v : s.lagged)
+        for (int a = 0; a < 3; ++a) out << ',' << v[a];
+      out << '\n';
     }
     if (!out) {
       std::cerr << "palpate-bench-multirate: cannot write " << csv << "\n";
@@ -168,6 +194,16 @@ int main(int argc, char** argv) {
     const double p = r.peak > 0 ? 100.0 / r.peak : 0.0;
     std::printf("%-9s %7zu | %.3g %.3g %.3g (%.2f %%) | %.3g %.3g %.3g (%.2f %%)\n", name.c_str(), local[k].size(),
                 a.median, a.p99, a.max, a.p99 * p, b.median, b.p99, b.max, b.p99 * p);
+  }
+  for (size_t l = 0; l < lags; ++l) {
+    std::printf("local model, its stiffness %d steps old: p99 N (%% peak) per motion:", config.stiffness_lags[l]);
+    for (int k = 0; k <= kinds; ++k) {
+      if (lagged[l][k].empty()) continue;
+      const double p99 = stats_of(lagged[l][k]).p99;
+      std::printf(" %s %.3g (%.2f %%)", k == kinds ? "all" : haptic::motion_name(static_cast<haptic::Motion>(k)),
+                  p99, r.peak > 0 ? 100.0 * p99 / r.peak : 0.0);
+    }
+    std::printf("\n");
   }
   std::printf("by the model's age (age 0: the coarse step's own error, the floor):\n");
   for (size_t a = 0; a < local_by_age.size(); ++a) {

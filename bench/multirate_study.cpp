@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "server/haptic_loop.h"
+#include "server/local_model.h"
 #include "server/sim_loop.h"
 
 namespace palpate::bench {
@@ -52,6 +53,24 @@ void HeadlessSession::wait() {
 namespace {
 
 Vec3 vec(const haptic::V3& v) { return {v[0], v[1], v[2]}; }
+
+// The render input of step `now` as if its contact stiffness were that of step `old`:
+// server/local_model.h contact_model_now's rule (the old stiffness serves while the
+// contact state is the one it was computed in; the valid radius shrinks by the tool's
+// travel since), then render_model as the session does.
+server::RenderInput with_stiffness_of(const Snapshot& now, const Snapshot& old, const CouplingOptions& coupling,
+                                      double contact_floor) {
+  server::LocalModel c = now.contact_model;
+  const server::LocalModel& k = old.contact_model;
+  const bool touching = c.force.squaredNorm() > 0.0, k_touching = k.force.squaredNorm() > 0.0;
+  c.stiffness = touching && k_touching ? k.stiffness : Mat3::Zero();
+  c.stiffness_tick = k.stiffness_tick;
+  c.valid_radius = touching == k_touching ? std::max(0.0, k.valid_radius - (c.origin - k.origin).norm()) : 0.0;
+  Snapshot lagged = now;
+  lagged.contact_model = c;
+  lagged.render_model = server::render_model(c, true, now.target, now.render_force, coupling, contact_floor);
+  return server::render_input_of(lagged);
+}
 haptic::V3 v3(const Vec3& v) { return {v[0], v[1], v[2]}; }
 
 }  // namespace
@@ -93,6 +112,19 @@ MultirateResult run_multirate_study(const MultirateConfig& config) {
   const long ticks = std::lround(config.seconds / h);
   r.samples.reserve(static_cast<size_t>(ticks));
 
+  // The last (largest lag + 1) coarse steps (a ring), for the lagged stiffnesses.
+  int max_lag = 0;
+  for (const int lag : config.stiffness_lags) {
+    if (lag < 0) throw std::invalid_argument("a stiffness lag must be >= 0 steps");
+    max_lag = std::max(max_lag, lag);
+  }
+  const size_t lags = config.stiffness_lags.size();
+  std::vector<Snapshot> recent(config.stiffness_lags.empty() ? 0 : static_cast<size_t>(max_lag) + 1);
+  long coarse_steps = 0;
+  const CouplingOptions coupling = coarse.coupling();
+  const double contact_floor = 0.5 * coarse.model().min_spacing;  // as Simulation::fill_local_models
+  std::vector<server::RenderInput> newest_lagged(lags), pending_lagged(lags);
+
   server::RenderInput newest;  // the newest coarse step the renderer may use
   server::RenderInput pending;  // the coarse step in progress (usable from its end time)
   double pending_time = 0;      // its state's time
@@ -102,16 +134,30 @@ MultirateResult run_multirate_study(const MultirateConfig& config) {
     if (k % ratio == 0) {  // a coarse step starts: the device position now
       const Snapshot& s = coarse.step(x);
       pending = server::render_input_of(s);
+      if (lags > 0) {
+        recent[static_cast<size_t>(coarse_steps) % recent.size()] = s;
+        for (size_t l = 0; l < lags; ++l) {
+          const long old = std::max(0L, coarse_steps - config.stiffness_lags[l]);
+          pending_lagged[l] = with_stiffness_of(s, recent[static_cast<size_t>(old) % recent.size()], coupling,
+                                                contact_floor);
+        }
+      }
+      ++coarse_steps;
       pending_time = s.sim_time;
     }
     const Snapshot& f = truth.step(x);  // state at t + h, the device at x
     const double now = t + h;
-    if (pending.valid && pending_time <= now + 1e-12) newest = pending;
+    if (pending.valid && pending_time <= now + 1e-12) {
+      newest = pending;
+      newest_lagged = pending_lagged;
+    }
     if (!newest.valid) continue;  // nothing to render from yet (the first coarse period)
     server::DeviceInput device{x, newest.command_seq + 1};  // newer than the step's
     const server::HapticSample rendered = server::render_sample(newest, device, 0.0);
     MultirateSample sample{t, path.segment_at(t), f.render_force, rendered.render_force, newest.render_force,
-                           now - newest.tick * model_dt};
+                           {}, now - newest.tick * model_dt};
+    for (const server::RenderInput& lagged : newest_lagged)
+      sample.lagged.push_back(server::render_sample(lagged, device, 0.0).render_force);
     r.peak = std::max(r.peak, f.render_force.norm());
     r.samples.push_back(sample);
   }

@@ -33,6 +33,7 @@ class HeadlessSession {
   // One tick with the device at x; the frame it published.
   const server::Snapshot& step(const Vec3& x);
   const Model& model() const { return sim_.model(); }
+  CouplingOptions coupling() const { return sim_.initial_coupling(); }
   double seconds() const { return seconds_; }  // wall time spent stepping
 
  private:
@@ -49,6 +50,11 @@ struct MultirateConfig {
   double model_dt = 0;           // s, the coarse step; 0: the scene's integrator.dt
   double seconds = 6;            // the path's duration
   double depth = 0;              // m below first touch; 0: R / 5
+  // Also render with the contact stiffness of N coarse steps before the step rendered
+  // from, for each N here (origin and force stay the newest step's): a real-time
+  // session's stiffness worker lags the loop (palpate-bench-haptic's "stiffness age").
+  // MultirateSample::lagged, in this order.
+  std::vector<int> stiffness_lags;
 };
 
 struct MultirateSample {
@@ -57,6 +63,7 @@ struct MultirateSample {
   Vec3 truth;          // N, the render force of the run stepped at the haptic rate
   Vec3 multirate;      // N, rendered from the newest coarse step's local model
   Vec3 hold;           // N, the newest coarse step's own render force (zero-order hold)
+  std::vector<Vec3> lagged;  // N, as multirate with the stiffness MultirateConfig::stiffness_lags older
   double model_age;    // s, render time minus the coarse step's state time
 };
 
