@@ -212,76 +212,30 @@ void ContactStiffness::solve(const Model& model, int& iterations, bool& converge
   for (int j = 0; j < 3; ++j) iterations += iterations_of[j];
 }
 
-LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedState& state) {
-  const int n = n_;
-  if (model.particle_count != n)
-    throw std::invalid_argument("ContactStiffness::evaluate: the model has " + std::to_string(model.particle_count) +
-                                " particles, the instance was built for " + std::to_string(n));
-  if (state.position.cols() != n)
-    throw std::invalid_argument("ContactStiffness::evaluate: state.position has " +
-                                std::to_string(state.position.cols()) + " columns, the model " +
-                                std::to_string(n) + " particles");
-  if (state.contact_normal_force.size() != state.contact_index.size())
-    throw std::invalid_argument("ContactStiffness::evaluate: state.contact_normal_force has " +
-                                std::to_string(state.contact_normal_force.size()) +
-                                " entries, state.contact_index " + std::to_string(state.contact_index.size()));
-  const Vec3 c = state.indenter_center;
-  const double R = model.indenter_radius;
-  LocalContactModel out;
-  out.origin = c;
-  out.force = state.indenter_contact_force;
-  out.tick = state.tick;
-
-  // The active set A of (2.7): the particles with a positive multiplier.
+void ContactStiffness::begin_active_set() {
   for (int i : active_) slot_[i] = -1;
   active_.clear();
   geometric_.clear();
   multiplier_.clear();
   active_precond_.clear();
-  for (size_t k = 0; k < state.contact_index.size(); ++k) {
-    const int i = state.contact_index[k];
-    const double mu = state.contact_normal_force[k];
-    if (i < 0 || i >= n || !movable_[i] || slot_[i] >= 0)
-      throw std::invalid_argument("ContactStiffness::evaluate: state.contact_index[" + std::to_string(k) +
-                                  "] = " + std::to_string(i) + " is not a free particle listed once");
-    if (!(mu > 0.0)) continue;
-    const Vec3 d = state.position.col(i) - c;
-    const double r = d.norm();
-    if (!(r > 0.0)) continue;  // a particle at the centre has no normal
-    const Vec3 nrm = d / r;
-    slot_[i] = static_cast<int>(active_.size());
-    normal_.col(static_cast<Eigen::Index>(active_.size())) = nrm;
-    active_.push_back(i);
-    multiplier_.push_back(mu);
-    geometric_.push_back(mu / r);  // (2.8)
-    // The projected block-Jacobi inverse at an active particle: (P D P)^+ on its tangent plane.
-    const Mat3 P = Mat3::Identity() - nrm * nrm.transpose();
-    const Mat3& D = diagonal_[i];
-    const Mat3 Dp = P * D * P + (D.trace() / 3.0) * nrm * nrm.transpose();
-    active_precond_.push_back(P * spd_inverse(Dp) * P);
-  }
+}
+
+void ContactStiffness::add_active(int i, double mu, const Vec3& nrm, double r) {
+  slot_[i] = static_cast<int>(active_.size());
+  normal_.col(static_cast<Eigen::Index>(active_.size())) = nrm;
+  active_.push_back(i);
+  multiplier_.push_back(mu);
+  geometric_.push_back(mu / r);  // (2.8)
+  // The projected block-Jacobi inverse at an active particle: (P D P)^+ on its tangent plane.
+  const Mat3 P = Mat3::Identity() - nrm * nrm.transpose();
+  const Mat3& D = diagonal_[i];
+  const Mat3 Dp = P * D * P + (D.trace() / 3.0) * nrm * nrm.transpose();
+  active_precond_.push_back(P * spd_inverse(Dp) * P);
+}
+
+Mat3 ContactStiffness::stiffness_of_active_set(const Model& model, const CarriedState& state, int& iterations,
+                                               bool& converged) {
   const int m = static_cast<int>(active_.size());
-  out.active_count = m;
-
-  if (m == 0) {
-    // No contact (2.15): F0 = 0, K = 0, the radius is the distance to the nearest free particle.
-    clear_warm_start();
-    double nearest = std::numeric_limits<double>::infinity();
-    for (int j = 0; j < n; ++j) {
-      if (!movable_[j]) continue;
-      const Vec3 d = state.position.col(j) - c;
-      const double g = d.norm() - R;
-      if (g < nearest) {
-        nearest = g;
-        out.limiting_particle = j;
-        out.limiting_direction = d.normalized();
-      }
-    }
-    out.valid_radius = std::max(0.0, nearest);
-    out.limited_by = LocalContactModel::Limit::no_contact;
-    return out;
-  }
-
   linearize_elastic(model, state.position, tangent_);
   // u_p (2.10): the prescribed normal displacement (n_a . e_j) n_a at the active particles (2.7).
   for (int j = 0; j < 3; ++j) {
@@ -305,13 +259,14 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
     project(b_[j]);
   }
   // response_[j] holds the previous call's dx/dc_j: P of it is the warm start.
-  solve(model, out.cg_iterations, out.converged);
+  solve(model, iterations, converged);
   for (int j = 0; j < 3; ++j) response_[j] += u_p_[j];
   {
     const Points* in[3] = {&response_[0], &response_[1], &response_[2]};
     Points* df[3] = {&df_[0], &df_[1], &df_[2]};
     elastic_force_differentials(model, tangent_, 3, in, df);  // -K_b dx
   }
+  Mat3 K;
   for (int j = 0; j < 3; ++j) {
     const Vec3 e = Vec3::Unit(j);
     const Points& dx = response_[j];
@@ -325,8 +280,83 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
       const Vec3 rel = dx.col(i) - e;  // r_a dn_a = (I - n n^T)(dx_a - dc) (2.9)
       dF -= dmu * nrm + geometric_[a] * (rel - nrm.dot(rel) * nrm);
     }
-    out.stiffness.col(j) = dF;
+    K.col(j) = dF;
   }
+  return K;
+}
+
+LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedState& state) {
+  const int n = n_;
+  if (model.particle_count != n)
+    throw std::invalid_argument("ContactStiffness::evaluate: the model has " + std::to_string(model.particle_count) +
+                                " particles, the instance was built for " + std::to_string(n));
+  if (state.position.cols() != n)
+    throw std::invalid_argument("ContactStiffness::evaluate: state.position has " +
+                                std::to_string(state.position.cols()) + " columns, the model " +
+                                std::to_string(n) + " particles");
+  if (state.contact_normal_force.size() != state.contact_index.size())
+    throw std::invalid_argument("ContactStiffness::evaluate: state.contact_normal_force has " +
+                                std::to_string(state.contact_normal_force.size()) +
+                                " entries, state.contact_index " + std::to_string(state.contact_index.size()));
+  const Vec3 c = state.indenter_center;
+  const double R = model.indenter_radius;
+  LocalContactModel out;
+  out.origin = c;
+  out.force = state.indenter_contact_force;
+  out.tick = state.tick;
+
+  // The active set A of (2.7): the particles with a positive multiplier.
+  begin_active_set();
+  for (size_t k = 0; k < state.contact_index.size(); ++k) {
+    const int i = state.contact_index[k];
+    const double mu = state.contact_normal_force[k];
+    if (i < 0 || i >= n || !movable_[i] || slot_[i] >= 0)
+      throw std::invalid_argument("ContactStiffness::evaluate: state.contact_index[" + std::to_string(k) +
+                                  "] = " + std::to_string(i) + " is not a free particle listed once");
+    if (!(mu > 0.0)) continue;
+    const Vec3 d = state.position.col(i) - c;
+    const double r = d.norm();
+    if (!(r > 0.0)) continue;  // a particle at the centre has no normal
+    add_active(i, mu, d / r, r);
+  }
+  const int m = static_cast<int>(active_.size());
+  out.active_count = m;
+
+  if (m == 0) {
+    // No contact (2.15): F0 = 0, K = 0, the radius is the distance to the nearest free particle.
+    double nearest = std::numeric_limits<double>::infinity();
+    for (int j = 0; j < n; ++j) {
+      if (!movable_[j]) continue;
+      const Vec3 d = state.position.col(j) - c;
+      const double g = d.norm() - R;
+      if (g < nearest) {
+        nearest = g;
+        out.limiting_particle = j;
+        out.limiting_direction = d.normalized();
+      }
+    }
+    out.valid_radius = std::max(0.0, nearest);
+    out.limited_by = LocalContactModel::Limit::no_contact;
+    if (!settings_.touch_stiffness || out.limiting_particle < 0) {
+      clear_warm_start();
+      return out;
+    }
+    // The stiffness at first touch (2.20): the nearest free particles (ties within 10^-3 of
+    // the smallest spacing) active with zero multipliers.
+    const double tie = 1e-3 * model.min_spacing;
+    for (int j = 0; j < n; ++j) {
+      if (!movable_[j]) continue;
+      const Vec3 d = state.position.col(j) - c;
+      const double r = d.norm();
+      if (r - R <= nearest + tie && r > 0.0) add_active(j, 0.0, d / r, r);
+    }
+    out.touch_stiffness = stiffness_of_active_set(model, state, out.cg_iterations, out.converged);
+    out.touch_count = static_cast<int>(active_.size());
+    begin_active_set();  // the next evaluation's warm start is response_, its active set its own
+    return out;
+  }
+
+  out.stiffness = stiffness_of_active_set(model, state, out.cg_iterations, out.converged);
 
   // The validity radius (2.14): the smallest tool displacement that changes the active set,
   // to first order, over every direction.

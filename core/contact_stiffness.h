@@ -38,6 +38,11 @@ struct LocalContactModel {
   Vec3 force{0, 0, 0};            // N, F0 = State::indenter_contact_force
   Mat3 stiffness = Mat3::Zero();  // N/m, K = dF/dx (2.12), column j = dF for dc = e_j
   double valid_radius = 0.0;      // m (2.14), (2.15)
+  // Out of contact only, when ContactStiffnessSettings::touch_stiffness is set: K at the
+  // moment the nearest free particles touch (2.20), for a renderer to use from the first
+  // contact on until a K computed in contact arrives (zero when not computed).
+  Mat3 touch_stiffness = Mat3::Zero();  // N/m
+  int touch_count = 0;                  // the particles it assumes touching (0: not computed)
   int64_t tick = 0;               // the state's tick it was computed at
   int active_count = 0;           // particles in contact (the active set of (2.7))
   int cg_iterations = 0;          // projected CG iterations of the three solves (2.10)
@@ -60,6 +65,9 @@ const char* to_string(LocalContactModel::Limit);
 struct ContactStiffnessSettings {
   double tolerance = 1e-6;
   int max_iterations = 2000;
+  // Out of contact, also compute LocalContactModel::touch_stiffness (one more set of
+  // solves per evaluation without contact).
+  bool touch_stiffness = false;
 };
 
 // What the server's renderer uses (server/local_model.h): relative residual 10^-3. K then
@@ -67,7 +75,10 @@ struct ContactStiffnessSettings {
 // K error e moves a rendered force by e K dx, far below the rendering error of a 4 ms
 // model; palpate-bench-contact-stiffness prints it) at a tenth to a twentieth of the
 // warm-started iterations of the default 10^-6, which verification keeps.
-inline constexpr ContactStiffnessSettings kRenderingStiffness{1e-3, 2000};
+// It also computes the stiffness at first touch: a worker that needs tens of model steps
+// for an evaluation in contact would otherwise leave the first tens of milliseconds of
+// every press without one (docs/verification.md, "Multirate haptics").
+inline constexpr ContactStiffnessSettings kRenderingStiffness{1e-3, 2000, true};
 
 class ContactStiffness {
  public:
@@ -105,6 +116,12 @@ class ContactStiffness {
   // lockstep: each its own alpha, beta and stopping test, the products of the directions still
   // iterating in one call. Adds each direction's iterations to `iterations`.
   void solve(const Model& model, int& iterations, bool& converged);
+  // The active set: emptied, then one particle at a time (multiplier mu, normal nrm, |x_i - c| = r).
+  void begin_active_set();
+  void add_active(int i, double mu, const Vec3& nrm, double r);
+  // K of (2.10)-(2.12) for the current active set at `state`; response_ and
+  // multiplier_response_ are its solution.
+  Mat3 stiffness_of_active_set(const Model& model, const CarriedState& state, int& iterations, bool& converged);
 
   int n_ = 0;
   ContactStiffnessSettings settings_;

@@ -113,6 +113,8 @@ LocalModel contact_model_now(const State& state, const LocalContactModel& newest
   if (touching == computed_touching) {
     if (touching) m.stiffness = newest.stiffness;
     m.valid_radius = std::max(0.0, newest.valid_radius - moved);
+  } else if (touching && newest.touch_count > 0) {
+    m.stiffness = newest.touch_stiffness;  // computed before the touch, for it (2.20); radius: the floor
   }
   return m;
 }

@@ -65,8 +65,10 @@ class StiffnessSource {
 
 // The frame's contact model at `state` from the newest stiffness: origin and force are
 // the state's; the stiffness is the newest result's when it was computed with contact
-// and the state is still in contact (else zero), and the valid radius shrinks by how
-// far the tool moved since (never below zero).
+// and the state is still in contact, or its stiffness at first touch (docs/physics.md
+// (2.20)) when it was computed out of contact and the state now touches (else zero);
+// the valid radius shrinks by how far the tool moved since (never below zero; zero
+// after a touch, where render_model's floor applies).
 // The nearest passive stiffness to K: its symmetric part with every positive eigenvalue
 // set to zero (docs/protocol.md (P.2)). The discrete contact's K may have one: pushed
 // sideways off a particle, the frictionless sphere is pushed further (docs/physics.md

@@ -11,6 +11,8 @@
 //    tool's distance to the body;
 //  - K_zz against the slope of the exact linear solve (LinearStaticContact at two
 //    forces) and against Hertz's dF/dd = (3/2) F / d on a well-resolved graded FEM cube;
+//  - the stiffness at first touch (2.20), computed out of contact, against the static
+//    solves with the tool held just past the touch;
 //  - warm starts, the converged flag, no allocation after the first call, errors.
 #include <gtest/gtest.h>
 #include <cstdio>
@@ -297,6 +299,61 @@ TEST(ContactStiffness, WithoutContactForceAndStiffnessAreZeroAndTheRadiusIsTheDi
   const State past = held_at(s, st, lm.origin + 1.02 * lm.valid_radius * lm.limiting_direction);
   EXPECT_TRUE(short_of.contact_index.empty());
   EXPECT_FALSE(past.contact_index.empty());
+}
+
+// The stiffness at first touch (2.20), computed out of contact, against the static solves
+// with the tool held just past the touch: with one particle touching, F(dc) = K_touch dc
+// up to second order (the multiplier's normal rotation, the strain's nonlinearity), so
+// the relative difference falls as the press deepens less (by about 2 when it halves).
+TEST(ContactStiffness, TheStiffnessAtFirstTouchPredictsTheForceOfTheTouch) {
+  test::Setup s = test::setup_from_json(kMlsCube);
+  const Model& m = s.model;
+  const State rest = make_state(m, s.opt);
+  const Vec3 touch(0.07, 0.03, touch_height(m, 0.07, 0.03));  // one particle touches here
+  int touched = 0;
+  for (int i = 0; i < m.particle_count; ++i)
+    if ((m.rest_position.col(i) - touch).norm() < (m.rest_position.col(touched) - touch).norm()) touched = i;
+  // 2 mm away along the particle's normal (approached along another line, the normal at the
+  // touch differs from the one computed here by the angle the line makes with it over R).
+  State above = rest;
+  above.indenter_center = touch + 2e-3 * (touch - m.rest_position.col(touched)).normalized();
+  ContactStiffness plain(m), touching(m, {1e-10, 2000, true});
+  const LocalContactModel without = plain.evaluate(m, above);
+  EXPECT_EQ(without.touch_count, 0);
+  EXPECT_TRUE(without.touch_stiffness.isZero(0.0));
+  const LocalContactModel lm = touching.evaluate(m, above);
+  // Again, after its first call: no allocation, and the warm start is the solution.
+  const long before = g_allocations.load();
+  const LocalContactModel again = touching.evaluate(m, above);
+  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_EQ(again.cg_iterations, 0);
+  EXPECT_LT(max_abs(again.touch_stiffness - lm.touch_stiffness), 1e-8 * max_abs(lm.touch_stiffness));
+  ASSERT_TRUE(lm.converged);
+  EXPECT_EQ(lm.active_count, 0);
+  EXPECT_TRUE(lm.stiffness.isZero(0.0));  // out of contact K is zero; the touch stiffness is apart
+  EXPECT_NEAR(lm.valid_radius, 2e-3, 1e-9);
+  ASSERT_EQ(lm.touch_count, 1);
+  EXPECT_EQ(lm.limiting_particle, touched);
+  const Mat3& K = lm.touch_stiffness;
+  EXPECT_LT(K(2, 2), 0.0);
+  EXPECT_LT(max_abs(K - K.transpose()), 1e-6 * max_abs(K));  // (2.13) with zero multipliers
+  // Pressed down and sideways from the touch point.
+  const Vec3 direction = Vec3(0.3, -0.2, -1.0).normalized();
+  double previous = 0.0;
+  for (double depth : {2e-3, 1e-3, 5e-4}) {
+    const State held = held_at(s, rest, touch + depth * direction);
+    ASSERT_EQ(held.contact_index.size(), 1u) << "depth " << depth;
+    EXPECT_EQ(held.contact_index[0], lm.limiting_particle);
+    const Vec3 predicted = K * (depth * direction);
+    const double error = (held.indenter_contact_force - predicted).norm() / held.indenter_contact_force.norm();
+    std::printf("touch stiffness: %.1e m past the touch, force %.4g N, predicted %.4g N, relative difference %.2e\n",
+                depth, held.indenter_contact_force.norm(), predicted.norm(), error);
+    EXPECT_LT(error, 1e-2);
+    if (previous > 0) {
+      EXPECT_GT(previous / error, 1.6) << "the difference does not fall with the depth";
+    }
+    previous = error;
+  }
 }
 
 TEST(ContactStiffness, VerticalStiffnessAgreesWithTheExactLinearSolveAndHertz) {

@@ -126,3 +126,44 @@ TEST(LocalModel, ForceModeRendersTheContactModelItself) {
 }
 
 }  // namespace
+
+// contact_model_now's choice of stiffness (docs/physics.md (2.20)): a stiffness computed out
+// of contact serves once the tool touches only through its stiffness at first touch; one
+// computed in contact serves while the tool still touches.
+TEST(LocalModel, TheStiffnessAtFirstTouchServesUntilOneInContactArrives) {
+  using palpate::LocalContactModel;
+  using palpate::server::contact_model_now;
+  LocalContactModel before;  // out of contact, 10 mm above the body
+  before.tick = 5;
+  before.origin = Vec3(0, 0, 0.01);
+  before.valid_radius = 0.01;
+  before.touch_count = 1;
+  before.touch_stiffness = Vec3(-1.0, -2.0, -300.0).asDiagonal();
+  palpate::State now;  // touching, 1 mm in
+  now.indenter_center = Vec3(0, 0, -0.001);
+  now.indenter_contact_force = Vec3(0, 0, 0.3);
+  now.contact_index = {7};
+  now.contact_normal_force = {0.3};
+  LocalModel m = contact_model_now(now, before);
+  EXPECT_EQ(m.stiffness, before.touch_stiffness);
+  EXPECT_EQ(m.stiffness_tick, 5);
+  EXPECT_EQ(m.valid_radius, 0.0);  // render_model's floor applies in contact
+  EXPECT_EQ(m.force, now.indenter_contact_force);
+  // Without a stiffness at first touch: none.
+  LocalContactModel plain = before;
+  plain.touch_count = 0;
+  plain.touch_stiffness.setZero();
+  EXPECT_TRUE(contact_model_now(now, plain).stiffness.isZero(0.0));
+  // Still out of contact: no stiffness; the radius shrinks by the tool's travel.
+  palpate::State approaching;
+  approaching.indenter_center = Vec3(0, 0, 0.004);
+  m = contact_model_now(approaching, before);
+  EXPECT_TRUE(m.stiffness.isZero(0.0));
+  EXPECT_NEAR(m.valid_radius, 0.004, 1e-15);
+  // Computed in contact, the tool has left: none.
+  LocalContactModel in_contact = before;
+  in_contact.active_count = 3;
+  in_contact.stiffness = Vec3(-5.0, -5.0, -500.0).asDiagonal();
+  EXPECT_TRUE(contact_model_now(approaching, in_contact).stiffness.isZero(0.0));
+  EXPECT_EQ(contact_model_now(now, in_contact).stiffness, in_contact.stiffness);
+}
