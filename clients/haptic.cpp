@@ -339,6 +339,7 @@ struct Inbox {
   const PalpationPath* path = nullptr;
   std::vector<double>* model_age_ms = nullptr;
   std::vector<double>* stiffness_age_ticks = nullptr;
+  std::vector<double>* stiffness_age_touching_ticks = nullptr;
   size_t touching_without_stiffness = 0;  // frames with a contact force and no K yet
   std::vector<Result::Served>* served = nullptr;
   uint64_t deadline_misses = 0;  // the newest frame's Frame.deadlineMisses
@@ -371,10 +372,14 @@ class Sink final : public wire::FrameSink::Server {
       if (f.getHapticTick() >= 0 && in.model_age_ms->size() < in.model_age_ms->capacity())
         in.model_age_ms->push_back(static_cast<double>(f.getModelAgeNs()) * 1e-6);
       const LocalModel& lm = in.newest.render_model;
-      if (lm.stiffness_tick >= 0 && in.stiffness_age_ticks->size() < in.stiffness_age_ticks->capacity())
-        in.stiffness_age_ticks->push_back(static_cast<double>(in.newest.tick - lm.stiffness_tick));
-      else if (lm.stiffness_tick < 0 && (lm.force[0] != 0 || lm.force[1] != 0 || lm.force[2] != 0))
+      const bool touching = lm.force[0] != 0 || lm.force[1] != 0 || lm.force[2] != 0;
+      if (lm.stiffness_tick >= 0 && in.stiffness_age_ticks->size() < in.stiffness_age_ticks->capacity()) {
+        const double age = static_cast<double>(in.newest.tick - lm.stiffness_tick);
+        in.stiffness_age_ticks->push_back(age);
+        if (touching) in.stiffness_age_touching_ticks->push_back(age);  // same capacity, never more
+      } else if (lm.stiffness_tick < 0 && touching) {
         ++in.touching_without_stiffness;
+      }
       if (f.getHapticTick() >= 0 && in.served->size() < in.served->capacity())
         in.served->push_back({f.getHapticTick(), in.newest.target, in.newest.render_force, t});
       in.errors->on_frame(in.newest, in.path->segment_at(t));
@@ -433,6 +438,9 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   std::vector<double> stiffness_age_ticks;
   stiffness_age_ticks.reserve(2 * ticks);
   inbox->stiffness_age_ticks = &stiffness_age_ticks;
+  std::vector<double> stiffness_age_touching_ticks;
+  stiffness_age_touching_ticks.reserve(2 * ticks);
+  inbox->stiffness_age_touching_ticks = &stiffness_age_touching_ticks;
   Result result;
   if (info.getHapticRateHz() > 0) result.served.reserve(2 * ticks);
   inbox->served = &result.served;
@@ -552,6 +560,7 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   s.model_age_max_us = stats.getModelAgeUs().getMax();
   result.model_age_ms = percentiles(std::move(model_age_ms));
   result.stiffness_age_ticks = percentiles(std::move(stiffness_age_ticks));
+  result.stiffness_age_touching_ticks = percentiles(std::move(stiffness_age_touching_ticks));
   result.touching_without_stiffness = inbox->touching_without_stiffness;
   result.misses_seen_in_frames = inbox->deadline_misses;
 
@@ -619,10 +628,11 @@ void print_report(std::FILE* out, const Result& r) {
                  1e-3 * s.model_age_p99_us, 1e-3 * s.model_age_max_us, r.model_age_ms.p50, r.model_age_ms.p99);
   }
   std::fprintf(out, "contact stiffness age p50 %.0f, p99 %.0f, max %.0f ticks behind its frame (%.1f / %.1f / %.1f ms); "
-               "%zu frames touching before the first\n",
+               "touching: p50 %.0f, p99 %.0f ticks; %zu frames touching before the first\n",
                r.stiffness_age_ticks.p50, r.stiffness_age_ticks.p99, r.stiffness_age_ticks.max,
                1e3 * r.stiffness_age_ticks.p50 / s.target_hz, 1e3 * r.stiffness_age_ticks.p99 / s.target_hz,
-               1e3 * r.stiffness_age_ticks.max / s.target_hz, r.touching_without_stiffness);
+               1e3 * r.stiffness_age_ticks.max / s.target_hz, r.stiffness_age_touching_ticks.p50,
+               r.stiffness_age_touching_ticks.p99, r.touching_without_stiffness);
   std::fprintf(out, "misses in frames  %llu reported by the stream as they happened (Frame.deadlineMisses)\n",
                static_cast<unsigned long long>(r.misses_seen_in_frames));
   std::fprintf(out, "frames            %zu received, %llu dropped by the server, %zu compared, %zu gaps\n", r.frames,
@@ -661,6 +671,8 @@ std::string json_fields(const Result& r) {
                   ", \"misses_seen_in_frames\": " + std::to_string(r.misses_seen_in_frames) +
                   ", \"stiffness_age_ticks_p50\": " + number(r.stiffness_age_ticks.p50) +
                   ", \"stiffness_age_ticks_p99\": " + number(r.stiffness_age_ticks.p99) +
+                  ", \"stiffness_age_touching_ticks_p50\": " + number(r.stiffness_age_touching_ticks.p50) +
+                  ", \"stiffness_age_touching_ticks_p99\": " + number(r.stiffness_age_touching_ticks.p99) +
                   ", \"touching_without_stiffness\": " + std::to_string(r.touching_without_stiffness) +
                   ", \"frames\": " + std::to_string(r.frames) + ", \"frames_dropped\": " +
                   std::to_string(s.frames_dropped) + ", \"frames_compared\": " + std::to_string(r.compared) +

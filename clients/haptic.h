@@ -242,6 +242,7 @@ struct Result {
   // tick (LocalModel.stiffnessTick), and the frames that carried a contact force but no
   // stiffness yet (K = 0: the local model renders the hold).
   Percentiles stiffness_age_ticks;
+  Percentiles stiffness_age_touching_ticks;  // the same over the frames with a contact force
   size_t touching_without_stiffness = 0;
   // Multirate: every frame received, by render tick (the force the server rendered and
   // where), for a replay against the scene stepped at the render rate
