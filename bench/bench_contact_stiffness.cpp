@@ -47,7 +47,7 @@ its own dt under a slowly varying command; prints medians.
   --period SECONDS    its period (default 0.5)
   --ticks N           steps timed (default 200)
   --tolerance X       relative residual of the projected CG (default: the server's,
-                      kRenderingStiffness, 1e-3)
+                      kRenderingStiffness, 1e-2)
   --max-iterations N  per solve (default 2000)
   --json              print one JSON object instead of the table
 Exit status: 0, 1 on a scene that does not load or a press that fails, 2 on a wrong argument.

@@ -70,15 +70,18 @@ struct ContactStiffnessSettings {
   bool touch_stiffness = false;
 };
 
-// What the server's renderer uses (server/local_model.h): relative residual 10^-3. K then
+// What the server's renderer uses (server/local_model.h): relative residual 10^-2. K then
 // agrees with a 10^-10 solve to a few 10^-4 of its largest entry on the shipped scenes (a
 // K error e moves a rendered force by e K dx, far below the rendering error of a 4 ms
-// model; palpate-bench-contact-stiffness prints it) at a tenth to a twentieth of the
-// warm-started iterations of the default 10^-6, which verification keeps.
+// model; palpate-bench-contact-stiffness prints it). While the tool moves the worker's
+// warm start is far, and an evaluation is nearly a cold one: 67 iterations instead of
+// 114 at 10^-3 on the graded cube, so K is that much younger, and its age, not this
+// error, is what a renderer feels (docs/verification.md, "Multirate haptics").
+// Verification keeps the default 10^-6.
 // It also computes the stiffness at first touch: a worker that needs tens of model steps
 // for an evaluation in contact would otherwise leave the first tens of milliseconds of
 // every press without one (docs/verification.md, "Multirate haptics").
-inline constexpr ContactStiffnessSettings kRenderingStiffness{1e-3, 2000, true};
+inline constexpr ContactStiffnessSettings kRenderingStiffness{1e-2, 2000, true};
 
 class ContactStiffness {
  public:

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
@@ -85,6 +86,7 @@ void StiffnessSource::run() {
       warm_generation = generation;
     }
     LocalContactModel result;
+    const auto started = std::chrono::steady_clock::now();
     try {
       result = stiffness_.evaluate(model_, work);
     } catch (const std::exception& e) {  // a state that does not belong to the model: a bug
@@ -93,6 +95,10 @@ void StiffnessSource::run() {
       result.tick = -1;
     }
     evaluations_.fetch_add(1, std::memory_order_relaxed);
+    // The worker's own thread (never the loop's): --log-level debug shows each evaluation.
+    spdlog::debug("contact stiffness: tick {}, {} active, {} at first touch, {} CG iterations, {:.1f} ms", result.tick,
+                  result.active_count, result.touch_count, result.cg_iterations,
+                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count());
     std::lock_guard<std::mutex> lock(mutex_);
     result_ = result;
     result_generation_ = generation;
