@@ -104,7 +104,8 @@ class ContactStiffness {
 
   // The particles' quasi-static response of the last evaluate() to a unit tool
   // displacement e_j (j = 0, 1, 2): dx/dc_j, 3 x n, zero at fixed particles (and all
-  // zero after an evaluation without contact). Also the next call's warm start.
+  // zero after an evaluation without contact, or the first touch's response with touch_stiffness).
+  // Also the next call's warm start.
   const Points& displacement_response(int j) const { return response_[j]; }
   // The multiplier increments of the last evaluate() (2.11): d mu_a / dc (N/m, component j
   // for dc = e_j) of the a-th active particle (the order of CarriedState::contact_index).
