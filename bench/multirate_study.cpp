@@ -54,10 +54,15 @@ namespace {
 
 Vec3 vec(const haptic::V3& v) { return {v[0], v[1], v[2]}; }
 
+haptic::V3 v3(const Vec3& v) { return {v[0], v[1], v[2]}; }
+
 // The render input of step `now` as if its contact stiffness were that of step `old`:
 // server/local_model.h contact_model_now's rule (the old stiffness serves while the
 // contact state is the one it was computed in; the valid radius shrinks by the tool's
-// travel since), then render_model as the session does.
+// travel since), then render_model as the session does. A copy of that rule on the
+// frames' LocalModel, which does not carry the stiffness at first touch (2.20): the
+// emulation is of the rule without it (the one docs/verification.md's lag table measured);
+// keep it in step with contact_model_now.
 server::RenderInput with_stiffness_of(const Snapshot& now, const Snapshot& old, const CouplingOptions& coupling,
                                       double contact_floor) {
   server::LocalModel c = now.contact_model;
@@ -71,7 +76,6 @@ server::RenderInput with_stiffness_of(const Snapshot& now, const Snapshot& old, 
   lagged.render_model = server::render_model(c, true, now.target, now.render_force, coupling, contact_floor);
   return server::render_input_of(lagged);
 }
-haptic::V3 v3(const Vec3& v) { return {v[0], v[1], v[2]}; }
 
 }  // namespace
 
