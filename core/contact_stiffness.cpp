@@ -77,6 +77,9 @@ ContactStiffness::ContactStiffness(const Model& model, ContactStiffnessSettings 
   if (settings.max_iterations < 1)
     throw std::invalid_argument("ContactStiffnessSettings::max_iterations: must be >= 1, got " +
                                 std::to_string(settings.max_iterations));
+  if (settings.coarse_per_axis != 0 && !(settings.coarse_per_axis >= 2 && settings.coarse_per_axis <= 12))
+    throw std::invalid_argument("ContactStiffnessSettings::coarse_per_axis: must be 0 (none) or in [2, 12], got " +
+                                std::to_string(settings.coarse_per_axis));
   const int n = n_;
   // The linearisation point's arrays at their final size (linearize_elastic resizes them
   // to exactly this, so it never allocates).
@@ -100,6 +103,88 @@ ContactStiffness::ContactStiffness(const Model& model, ContactStiffnessSettings 
     for (int j = 0; j < 3; ++j) p[j].setZero(3, n);
   for (Points& p : response_) p.setZero(3, n);
   multiplier_response_.setZero(n, 3);
+  if (settings.coarse_per_axis > 0) {
+    // At most about a third of the cloud's nodes per axis: a coarser lattice than that costs
+    // more per iteration than it saves (2.21).
+    const int cap = std::max(2, static_cast<int>(std::lround(std::cbrt(static_cast<double>(n)) / 3.0)));
+    build_coarse_correction(model, std::min(settings.coarse_per_axis, cap));
+  }
+}
+
+void ContactStiffness::build_coarse_correction(const Model& model, int per_axis) {
+  // (2.21): the lattice's nodes along each axis at the quantiles of the particles'
+  // coordinates, so that a graded cloud gets a graded lattice.
+  const int n = n_;
+  const Points& X = model.rest_position;
+  std::vector<double> axis[3], sorted(static_cast<size_t>(n));
+  for (int c = 0; c < 3; ++c) {
+    for (int i = 0; i < n; ++i) sorted[i] = X(c, i);
+    std::sort(sorted.begin(), sorted.end());
+    for (int k = 0; k < per_axis; ++k) {
+      const double q = sorted[static_cast<size_t>(std::lround(static_cast<double>(k) * (n - 1) / (per_axis - 1)))];
+      if (axis[c].empty() || q > axis[c].back()) axis[c].push_back(q);
+    }
+    if (axis[c].size() < 2) return;  // a flat cloud: block Jacobi alone
+  }
+  const int nx = static_cast<int>(axis[0].size()), ny = static_cast<int>(axis[1].size());
+  const int nodes = nx * ny * static_cast<int>(axis[2].size());
+  // T: each free particle interpolates the 8 nodes of its cell trilinearly; fixed ones nothing.
+  coarse_node_.assign(8 * static_cast<size_t>(n), 0);
+  coarse_weight_.assign(8 * static_cast<size_t>(n), 0.0);
+  for (int i = 0; i < n; ++i) {
+    if (!movable_[i]) continue;
+    int cell[3];
+    double t[3];
+    for (int c = 0; c < 3; ++c) {
+      const std::vector<double>& a = axis[c];
+      const int k = std::clamp(static_cast<int>(std::upper_bound(a.begin(), a.end(), X(c, i)) - a.begin()) - 1, 0,
+                               static_cast<int>(a.size()) - 2);
+      cell[c] = k;
+      t[c] = std::clamp((X(c, i) - a[k]) / (a[k + 1] - a[k]), 0.0, 1.0);
+    }
+    for (int corner = 0; corner < 8; ++corner) {
+      const int b[3] = {corner & 1, (corner >> 1) & 1, (corner >> 2) & 1};
+      double w = 1.0;
+      for (int c = 0; c < 3; ++c) w *= b[c] ? t[c] : 1.0 - t[c];
+      coarse_node_[8 * i + corner] = ((cell[2] + b[2]) * ny + cell[1] + b[1]) * nx + cell[0] + b[0];
+      coarse_weight_[8 * i + corner] = w;
+    }
+  }
+  // A_c = T^T K_0 T, three columns per tangent sweep (u_p_ and df_ serve as scratch).
+  const int unknowns = 3 * nodes;
+  linearize_elastic(model, X, tangent_);
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(unknowns, unknowns);
+  for (int first = 0; first < unknowns; first += 3) {
+    const int count = std::min(3, unknowns - first);
+    const Points* in[3] = {&u_p_[0], &u_p_[1], &u_p_[2]};
+    Points* df[3] = {&df_[0], &df_[1], &df_[2]};
+    for (int q = 0; q < count; ++q) {
+      const int node = (first + q) / 3, component = (first + q) % 3;
+      u_p_[q].setZero();
+      for (size_t k = 0; k < coarse_node_.size(); ++k)
+        if (coarse_node_[k] == node) u_p_[q](component, static_cast<Eigen::Index>(k / 8)) += coarse_weight_[k];
+    }
+    elastic_force_differentials(model, tangent_, count, in, df);  // -K_0 T e_k
+    for (int q = 0; q < count; ++q)
+      for (size_t k = 0; k < coarse_node_.size(); ++k)
+        if (coarse_weight_[k] != 0.0)
+          A.block<3, 1>(3 * coarse_node_[k], first + q) -= coarse_weight_[k] * df_[q].col(static_cast<Eigen::Index>(k / 8));
+  }
+  A = 0.5 * (A + A.transpose()).eval();
+  // A node whose cells hold no free particle has no coarse unknowns: decoupled.
+  const double largest = A.diagonal().maxCoeff();
+  for (int k = 0; k < unknowns; ++k)
+    if (!(A(k, k) > 1e-12 * largest)) {
+      A.row(k).setZero();
+      A.col(k).setZero();
+      A(k, k) = 1.0;
+    }
+  const Eigen::LLT<Eigen::MatrixXd> factor(A);
+  if (factor.info() != Eigen::Success) return;  // not positive definite: block Jacobi alone
+  coarse_inverse_ = factor.solve(Eigen::MatrixXd::Identity(unknowns, unknowns));
+  coarse_rhs_.setZero(unknowns, 3);
+  coarse_solution_.setZero(unknowns, 3);
+  coarse_nodes_ = nodes;
 }
 
 void ContactStiffness::clear_warm_start() {
@@ -129,9 +214,40 @@ void ContactStiffness::apply_operator(const Model& model, int count, const Point
   }
 }
 
-void ContactStiffness::precondition(const Points& r, Points& z) const {
-  for (int i = 0; i < n_; ++i) z.col(i) = diagonal_inverse_[i] * r.col(i);
-  for (size_t a = 0; a < active_.size(); ++a) z.col(active_[a]) = active_precond_[a] * r.col(active_[a]);
+void ContactStiffness::precondition(int count, const Points* const* r, Points* const* z) {
+  // (2.21): block Jacobi, restricted to the tangent plane at the active particles ...
+  for (int q = 0; q < count; ++q) {
+    const Points& rq = *r[q];
+    Points& zq = *z[q];
+    for (int i = 0; i < n_; ++i) zq.col(i) = diagonal_inverse_[i] * rq.col(i);
+    for (size_t a = 0; a < active_.size(); ++a) zq.col(active_[a]) = active_precond_[a] * rq.col(active_[a]);
+  }
+  if (coarse_nodes_ == 0) return;
+  // ... plus the coarse correction P T A_c^-1 T^T r, every direction in one pass over A_c^-1.
+  coarse_rhs_.setZero();
+  for (int i = 0; i < n_; ++i)
+    for (int k = 8 * i; k < 8 * i + 8; ++k) {
+      const double w = coarse_weight_[k];
+      if (w == 0.0) continue;
+      for (int q = 0; q < count; ++q) coarse_rhs_.block<3, 1>(3 * coarse_node_[k], q) += w * r[q]->col(i);
+    }
+  coarse_solution_.setZero();
+  for (Eigen::Index j = 0; j < coarse_inverse_.cols(); ++j)
+    for (int q = 0; q < count; ++q)
+      if (const double v = coarse_rhs_(j, q); v != 0.0) coarse_solution_.col(q) += v * coarse_inverse_.col(j);
+  for (int i = 0; i < n_; ++i) {
+    if (!movable_[i]) continue;
+    for (int q = 0; q < count; ++q) {
+      Vec3 s = Vec3::Zero();
+      for (int k = 8 * i; k < 8 * i + 8; ++k)
+        s += coarse_weight_[k] * coarse_solution_.block<3, 1>(3 * coarse_node_[k], q);
+      if (slot_[i] >= 0) {
+        const Vec3 nrm = normal_.col(slot_[i]);
+        s -= nrm.dot(s) * nrm;
+      }
+      z[q]->col(i) += s;
+    }
+  }
 }
 
 void ContactStiffness::solve(const Model& model, int& iterations, bool& converged) {
@@ -158,6 +274,9 @@ void ContactStiffness::solve(const Model& model, int& iterations, bool& converge
     ++count;
   }
   apply_operator(model, count, in, out);
+  const Points* residuals[3];
+  Points* preconditioned[3];
+  count = 0;
   for (int j = 0; j < 3; ++j) {
     if (!running[j]) continue;
     r_[j] = b_[j] - Ap_[j];
@@ -165,7 +284,13 @@ void ContactStiffness::solve(const Model& model, int& iterations, bool& converge
       response_[j].setZero();
       r_[j] = b_[j];
     }
-    precondition(r_[j], z_[j]);
+    index[count] = j;
+    residuals[count] = &r_[j];
+    preconditioned[count++] = &z_[j];
+  }
+  precondition(count, residuals, preconditioned);
+  for (int q = 0; q < count; ++q) {
+    const int j = index[q];
     p_[j] = z_[j];
     rz[j] = (r_[j].array() * z_[j].array()).sum();
   }
@@ -190,10 +315,11 @@ void ContactStiffness::solve(const Model& model, int& iterations, bool& converge
     }
     if (count == 0) break;
     apply_operator(model, count, in, out);
+    int stepped = 0;
+    int stepped_index[3];
     for (int q = 0; q < count; ++q) {
       const int j = index[q];
-      Points &w = response_[j], &r = r_[j], &z = z_[j], &p = p_[j], &Ap = Ap_[j];
-      const double pAp = (p.array() * Ap.array()).sum();
+      const double pAp = (p_[j].array() * Ap_[j].array()).sum();
       ++iterations_of[j];
       if (!(pAp > 0.0)) {  // K_b - G is not positive on the subspace: no stable equilibrium to linearise
         converged = false;
@@ -201,11 +327,17 @@ void ContactStiffness::solve(const Model& model, int& iterations, bool& converge
         continue;
       }
       const double alpha = rz[j] / pAp;
-      w += alpha * p;
-      r -= alpha * Ap;
-      precondition(r, z);
-      const double rz_next = (r.array() * z.array()).sum();
-      p = z + (rz_next / rz[j]) * p;
+      response_[j] += alpha * p_[j];
+      r_[j] -= alpha * Ap_[j];
+      stepped_index[stepped] = j;
+      residuals[stepped] = &r_[j];
+      preconditioned[stepped++] = &z_[j];
+    }
+    precondition(stepped, residuals, preconditioned);
+    for (int q = 0; q < stepped; ++q) {
+      const int j = stepped_index[q];
+      const double rz_next = (r_[j].array() * z_[j].array()).sum();
+      p_[j] = z_[j] + (rz_next / rz[j]) * p_[j];
       rz[j] = rz_next;
     }
   }

@@ -68,26 +68,33 @@ struct ContactStiffnessSettings {
   // Out of contact, also compute LocalContactModel::touch_stiffness (one more set of
   // solves per evaluation without contact).
   bool touch_stiffness = false;
+  // Nodes per axis of the coarse lattice of the preconditioner's coarse correction (2.21),
+  // 2 ... 12, at most about the cube root of the particle count over 3; 0: block Jacobi alone.
+  int coarse_per_axis = 6;
 };
 
 // What the server's renderer uses (server/local_model.h): relative residual 10^-2. K then
 // agrees with a 10^-10 solve to a few 10^-4 of its largest entry on the shipped scenes (a
 // K error e moves a rendered force by e K dx, far below the rendering error of a 4 ms
 // model; palpate-bench-contact-stiffness prints it). While the tool moves the worker's
-// warm start is far, and an evaluation is nearly a cold one: 67 iterations instead of
-// 114 at 10^-3 on the graded cube, so K is that much younger, and its age, not this
-// error, is what a renderer feels (docs/verification.md, "Multirate haptics").
+// warm start is far, and an evaluation is nearly a cold one: on the graded cube 36
+// iterations with the coarse correction (2.21) (67 without; 100 and 113 at 10^-3), so K
+// is that much younger, and its age, not this error, is what a renderer feels
+// (docs/verification.md, "Multirate haptics").
 // Verification keeps the default 10^-6.
 // It also computes the stiffness at first touch: a worker that needs tens of model steps
 // for an evaluation in contact would otherwise leave the first tens of milliseconds of
 // every press without one (docs/verification.md, "Multirate haptics").
-inline constexpr ContactStiffnessSettings kRenderingStiffness{1e-2, 2000, true};
+inline constexpr ContactStiffnessSettings kRenderingStiffness{1e-2, 2000, true, 6};
 
 class ContactStiffness {
  public:
-  // Sizes every scratch array for `model` (n particles, up to n active) and the
-  // block-Jacobi preconditioner of (2.10) from the model's reference tangent.
-  // Throws std::invalid_argument on a tolerance outside (0, 1) or max_iterations < 1.
+  // Sizes every scratch array for `model` (n particles, up to n active) and builds the
+  // preconditioner of (2.10) from the model's reference tangent: its 3x3 diagonal blocks
+  // and the coarse operator of (2.21) (one tangent sweep per three coarse unknowns:
+  // 216 sweeps for the default 6^3 lattice).
+  // Throws std::invalid_argument on a tolerance outside (0, 1), max_iterations < 1, or
+  // coarse_per_axis outside {0} and [2, 12].
   explicit ContactStiffness(const Model& model, ContactStiffnessSettings settings = {});
 
   // The local contact model at `state` (its positions, tool centre, contact set and
@@ -114,7 +121,12 @@ class ContactStiffness {
  private:
   // out[q] = P (K_b - G) P w[q] (2.10) for q < count, the tangent products in one sweep.
   void apply_operator(const Model& model, int count, const Points* const* w, Points* const* out);
-  void precondition(const Points& r, Points& z) const;                    // z = P D^-1 P r
+  // z[q] = P D^-1 P r[q] + P T A_c^-1 T^T P r[q] (2.21) for q < count (r in the subspace):
+  // the coarse solve of all directions in one pass over A_c^-1.
+  void precondition(int count, const Points* const* r, Points* const* z);
+  // The coarse lattice of (2.21) over the reference configuration, its interpolation and
+  // the factorised coarse operator T^T K_0 T (K_0 the tangent at rest, tangent_ on return).
+  void build_coarse_correction(const Model& model, int per_axis);
   void project(Points& w) const;                                          // w <- P w
   // The three projected CGs of (2.10), b_[j] -> response_[j] (which holds the warm start), in
   // lockstep: each its own alpha, beta and stopping test, the products of the directions still
@@ -140,6 +152,13 @@ class ContactStiffness {
   std::vector<double> multiplier_;      // mu_a, N
   std::vector<double> geometric_;       // mu_a / |x_a - c|, N/m: the normal rotation's stiffness (2.8)
   std::vector<Mat3> active_precond_;    // projected inverse blocks at the active particles
+  // The coarse correction (2.21): trilinear interpolation T from a coarse lattice (nodes at
+  // the quantiles of the particles' coordinates along each axis), 8 nodes per particle.
+  int coarse_nodes_ = 0;                   // 0: none
+  std::vector<int> coarse_node_;           // 8n: the coarse nodes of particle i's cell
+  std::vector<double> coarse_weight_;      // 8n: their trilinear weights (0 at fixed particles)
+  Eigen::MatrixXd coarse_inverse_;         // A_c^-1, A_c = T^T K_0 T (3 coarse_nodes_ unknowns)
+  Eigen::Matrix<double, Eigen::Dynamic, 3> coarse_rhs_, coarse_solution_;  // scratch: T^T r, A_c^-1 T^T r
   // Scratch of the solves.
   Points u_p_[3], b_[3], r_[3], z_[3], p_[3], Ap_[3], df_[3];  // per direction dc = e_j
   Points response_[3];  // dx/dc_j of the last call, the warm starts
