@@ -37,6 +37,9 @@ of the run's peak force), overall and per motion, and the wall time of both runs
   --stiffness-lag N   also render with the contact stiffness of N coarse steps before
                       the step rendered from, as a real-time session's worker lags it
                       (repeatable; each adds a row per motion: "local, K N steps old")
+  --touch-lookahead S the coarse run's stiffness at first touch is taken at the depth
+                      the tool reaches S/2 later at its approach speed (docs/physics.md
+                      (2.22); default 0: at the touch)
   --csv FILE          write every render tick: t, motion, truth, multirate and hold forces
                       (x y z, N), the model's age (s), the lagged renders (x y z, N)
   --json              print one JSON object instead of the table
@@ -76,6 +79,7 @@ int main(int argc, char** argv) {
       else if (arg == "--seconds") config.seconds = args.number(1e-9, 3600);
       else if (arg == "--depth") config.depth = args.number(1e-12, 1e3);
       else if (arg == "--stiffness-lag") config.stiffness_lags.push_back(static_cast<int>(args.integer(0, 100000)));
+      else if (arg == "--touch-lookahead") config.touch_lookahead = args.number(0, 10);
       else if (arg == "--csv") csv = args.value();
       else if (arg == "--json") json_out = true;
       else if (args.help()) {
@@ -133,6 +137,7 @@ int main(int argc, char** argv) {
   j["particles"] = r.particles;
   j["model_dt"] = r.model_dt;
   j["haptic_dt"] = r.haptic_dt;
+  j["touch_lookahead_s"] = config.touch_lookahead;
   j["peak_force"] = r.peak;
   j["truth_wall_seconds"] = r.truth_seconds;
   j["coarse_wall_seconds"] = r.coarse_seconds;
@@ -180,9 +185,9 @@ int main(int argc, char** argv) {
     std::cout << j.dump(2) << "\n";
     return 0;
   }
-  std::printf("%s: %d particles, model step %.4g s, render at %.0f Hz (%.0f renders per step)\n",
+  std::printf("%s: %d particles, model step %.4g s, render at %.0f Hz (%.0f renders per step), touch lookahead %g s\n",
               j["scene"].get<std::string>().c_str(), r.particles, r.model_dt, 1.0 / r.haptic_dt,
-              r.model_dt / r.haptic_dt);
+              r.model_dt / r.haptic_dt, config.touch_lookahead);
   std::printf("peak force %.4g N; model age median %.2f ms, max %.2f ms; wall time: truth %.1f s, coarse %.1f s\n",
               r.peak, 1e3 * age_stats.median, 1e3 * age_stats.max, r.truth_seconds, r.coarse_seconds);
   std::printf("%-9s %7s | %-30s | %-30s\n", "motion", "renders", "local model: median p99 max N (% peak)",

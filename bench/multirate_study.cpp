@@ -16,7 +16,8 @@ namespace palpate::bench {
 
 using server::Snapshot;
 
-HeadlessSession::HeadlessSession(Scene scene, bool contact_stiffness) : sim_(config(contact_stiffness), std::move(scene)) {
+HeadlessSession::HeadlessSession(Scene scene, bool contact_stiffness, double touch_lookahead)
+    : sim_(config(contact_stiffness, touch_lookahead), std::move(scene)) {
   while (sim_.phase() == server::Phase::starting) wait();
   if (sim_.phase() == server::Phase::failed) throw std::runtime_error(sim_.status().error);
 }
@@ -35,11 +36,12 @@ const Snapshot& HeadlessSession::step(const Vec3& x) {
   return s;
 }
 
-server::SimConfig HeadlessSession::config(bool contact_stiffness) {
+server::SimConfig HeadlessSession::config(bool contact_stiffness, double touch_lookahead) {
   server::SimConfig c;
   c.headless = true;
   c.try_realtime = false;
   c.contact_stiffness = contact_stiffness;
+  c.touch_lookahead = touch_lookahead;
   return c;
 }
 
@@ -56,24 +58,16 @@ Vec3 vec(const haptic::V3& v) { return {v[0], v[1], v[2]}; }
 
 haptic::V3 v3(const Vec3& v) { return {v[0], v[1], v[2]}; }
 
-// The render input of step `now` as if its contact stiffness were that of step `old`:
-// server/local_model.h contact_model_now's rule (the old stiffness serves while the
-// contact state is the one it was computed in; the valid radius shrinks by the tool's
-// travel since), then render_model as the session does. A copy of that rule on the
-// frames' LocalModel, which does not carry the stiffness at first touch (2.20): the
-// emulation is of the rule without it (the one docs/verification.md's lag table measured);
-// keep it in step with contact_model_now.
+// The render input of step `now` as if its contact stiffness were that of step `old`
+// (a headless session evaluates it at every step, so `old` carries its own state's): the
+// server's rule, contact_model_now, then render_model as the session does.
 server::RenderInput with_stiffness_of(const Snapshot& now, const Snapshot& old, const CouplingOptions& coupling,
                                       double contact_floor) {
-  server::LocalModel c = now.contact_model;
-  const server::LocalModel& k = old.contact_model;
-  const bool touching = c.force.squaredNorm() > 0.0, k_touching = k.force.squaredNorm() > 0.0;
-  c.stiffness = touching && k_touching ? k.stiffness : Mat3::Zero();
-  c.stiffness_tick = k.stiffness_tick;
-  c.valid_radius = touching == k_touching ? std::max(0.0, k.valid_radius - (c.origin - k.origin).norm()) : 0.0;
   Snapshot lagged = now;
-  lagged.contact_model = c;
-  lagged.render_model = server::render_model(c, true, now.target, now.render_force, coupling, contact_floor);
+  lagged.contact_model =
+      server::contact_model_now(now.tool_position, now.tool_contact_force, now.tool_touching, old.stiffness_source);
+  lagged.render_model =
+      server::render_model(lagged.contact_model, true, now.target, now.render_force, coupling, contact_floor);
   return server::render_input_of(lagged);
 }
 
@@ -95,7 +89,7 @@ MultirateResult run_multirate_study(const MultirateConfig& config) {
   coarse_scene.integrator.dt = model_dt;
 
   HeadlessSession truth(std::move(fine_scene), false);  // the truth needs no local model
-  HeadlessSession coarse(std::move(coarse_scene), true);
+  HeadlessSession coarse(std::move(coarse_scene), true, config.touch_lookahead);
   const Model& m = truth.model();
 
   haptic::Geometry g;

@@ -29,7 +29,8 @@ namespace palpate::bench {
 class HeadlessSession {
  public:
   // contact_stiffness: compute the frames' local models (at every step: costly on fine clouds).
-  HeadlessSession(Scene scene, bool contact_stiffness);
+  // touch_lookahead: SimConfig::touch_lookahead (s).
+  HeadlessSession(Scene scene, bool contact_stiffness, double touch_lookahead = 0.0);
   // One tick with the device at x; the frame it published.
   const server::Snapshot& step(const Vec3& x);
   const Model& model() const { return sim_.model(); }
@@ -37,7 +38,7 @@ class HeadlessSession {
   double seconds() const { return seconds_; }  // wall time spent stepping
 
  private:
-  static server::SimConfig config(bool contact_stiffness);
+  static server::SimConfig config(bool contact_stiffness, double touch_lookahead);
   void wait();
   server::Simulation sim_;
   double seconds_ = 0;
@@ -55,6 +56,9 @@ struct MultirateConfig {
   // session's stiffness worker lags the loop (palpate-bench-haptic's "stiffness age").
   // MultirateSample::lagged, in this order.
   std::vector<int> stiffness_lags;
+  // The coarse run's stiffness at first touch is taken this far ahead (s, docs/physics.md
+  // (2.22)); 0: at the touch.
+  double touch_lookahead = 0.0;
 };
 
 struct MultirateSample {

@@ -187,6 +187,13 @@ void ContactStiffness::build_coarse_correction(const Model& model, int per_axis)
   coarse_nodes_ = nodes;
 }
 
+void ContactStiffness::set_touch_lookahead(double seconds) {
+  if (!(seconds >= 0.0 && std::isfinite(seconds)))
+    throw std::invalid_argument("ContactStiffness::set_touch_lookahead: must be a finite time >= 0 s, got " +
+                                std::to_string(seconds));
+  touch_lookahead_ = seconds;
+}
+
 void ContactStiffness::clear_warm_start() {
   for (Points& p : response_) p.setZero();
 }
@@ -474,13 +481,17 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
       return out;
     }
     // The stiffness at first touch (2.20): the nearest free particles (ties within 10^-3 of
-    // the smallest spacing) active with zero multipliers.
-    const double tie = 1e-3 * model.min_spacing;
+    // the smallest spacing) active with zero multipliers; with a lookahead (2.22), those
+    // within half the depth d* = v_n T / 2 the tool reaches halfway through the time T it
+    // will serve, at its approach speed v_n toward the nearest particle.
+    const double approach = std::max(0.0, state.indenter_velocity.dot(out.limiting_direction));
+    const double depth = 0.5 * approach * touch_lookahead_;
+    const double band = std::max(1e-3 * model.min_spacing, 0.5 * depth);
     for (int j = 0; j < n; ++j) {
       if (!movable_[j]) continue;
       const Vec3 d = state.position.col(j) - c;
       const double r = d.norm();
-      if (r - R <= nearest + tie && r > 0.0) add_active(j, 0.0, d / r, r);
+      if (r - R <= nearest + band && r > 0.0) add_active(j, 0.0, d / r, r);
     }
     out.touch_stiffness = stiffness_of_active_set(model, state, out.cg_iterations, out.converged);
     out.touch_count = static_cast<int>(active_.size());

@@ -109,6 +109,15 @@ class ContactStiffness {
   // restored checkpoint, a new scene state, or to time a cold evaluation).
   void clear_warm_start();
 
+  // With touch_stiffness: how long (s) the stiffness at first touch will serve a renderer
+  // after the touch, until an evaluation in contact replaces it (about a worker's
+  // evaluation and a half). The touch is then taken at the depth the tool reaches
+  // halfway through that time at its current approach speed (2.22); 0 (the default,
+  // and what a headless session uses): at the touch itself (2.20). Throws
+  // std::invalid_argument on a negative or non-finite value.
+  void set_touch_lookahead(double seconds);
+  double touch_lookahead() const { return touch_lookahead_; }
+
   // The particles' quasi-static response of the last evaluate() to a unit tool
   // displacement e_j (j = 0, 1, 2): dx/dc_j, 3 x n, zero at fixed particles (and all
   // zero after an evaluation without contact, or the first touch's response with touch_stiffness).
@@ -141,6 +150,7 @@ class ContactStiffness {
 
   int n_ = 0;
   ContactStiffnessSettings settings_;
+  double touch_lookahead_ = 0.0;  // s (2.22)
   Workspace tangent_;  // the tangent's linearisation point (solid.h); only tangent_F / tangent_S_or_R are used
   std::vector<uint8_t> movable_;        // n: 1 = free particle, 0 = fixed
   std::vector<Mat3> diagonal_;          // n: D_i, the reference tangent's 3x3 diagonal block

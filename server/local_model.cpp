@@ -14,9 +14,10 @@
 
 namespace palpate::server {
 
-StiffnessSource::StiffnessSource(const Model& model, bool worker_thread)
+StiffnessSource::StiffnessSource(const Model& model, bool worker_thread, double touch_lookahead)
     : model_(model), threaded_(worker_thread), stiffness_(model, kRenderingStiffness) {
   newest_.tick = -1;
+  stiffness_.set_touch_lookahead(touch_lookahead);
   if (threaded_) {
     input_ = make_state(model, Options{});  // sized once: later copies reuse the storage
     work_ = input_;                          // the worker's own copy, made before it starts
@@ -70,6 +71,7 @@ void StiffnessSource::run() {
   setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 19);
   CarriedState& work = work_;
   uint64_t warm_generation = 0;
+  double seconds_out_of_contact = 0.0, seconds_in_contact = 0.0;  // averages of the evaluations' durations
   for (;;) {
     uint64_t generation = 0;
     {
@@ -86,6 +88,8 @@ void StiffnessSource::run() {
       warm_generation = generation;
     }
     LocalContactModel result;
+    // (2.22): the time a stiffness at first touch will serve, from the averages below.
+    stiffness_.set_touch_lookahead(0.5 * seconds_out_of_contact + seconds_in_contact);
     const auto started = std::chrono::steady_clock::now();
     try {
       result = stiffness_.evaluate(model_, work);
@@ -95,10 +99,14 @@ void StiffnessSource::run() {
       result.tick = -1;
     }
     evaluations_.fetch_add(1, std::memory_order_relaxed);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    double& average = result.active_count > 0 ? seconds_in_contact : seconds_out_of_contact;
+    average = average > 0.0 ? 0.75 * average + 0.25 * seconds : seconds;
     // The worker's own thread (never the loop's): --log-level debug shows each evaluation.
-    spdlog::debug("contact stiffness: tick {}, {} active, {} at first touch, {} CG iterations, {:.1f} ms", result.tick,
-                  result.active_count, result.touch_count, result.cg_iterations,
-                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count());
+    spdlog::debug("contact stiffness: tick {}, {} active, {} at first touch (lookahead {:.1f} ms), {} CG iterations, "
+                  "{:.1f} ms",
+                  result.tick, result.active_count, result.touch_count, 1e3 * stiffness_.touch_lookahead(),
+                  result.cg_iterations, 1e3 * seconds);
     std::lock_guard<std::mutex> lock(mutex_);
     result_ = result;
     result_generation_ = generation;
@@ -108,13 +116,17 @@ void StiffnessSource::run() {
 }
 
 LocalModel contact_model_now(const State& state, const LocalContactModel& newest) {
+  return contact_model_now(state.indenter_center, state.indenter_contact_force, !state.contact_index.empty(), newest);
+}
+
+LocalModel contact_model_now(const Vec3& centre, const Vec3& contact_force, bool touching,
+                             const LocalContactModel& newest) {
   LocalModel m;
-  m.origin = state.indenter_center;
-  m.force = state.indenter_contact_force;
+  m.origin = centre;
+  m.force = contact_force;
   m.stiffness_tick = newest.tick;
   if (newest.tick < 0) return m;
-  const double moved = (state.indenter_center - newest.origin).norm();
-  const bool touching = !state.contact_index.empty();
+  const double moved = (centre - newest.origin).norm();
   const bool computed_touching = newest.active_count > 0;
   if (touching == computed_touching) {
     if (touching) m.stiffness = newest.stiffness;

@@ -25,7 +25,12 @@ namespace palpate::server {
 // Session-thread methods are offer(), invalidate() and newest().
 class StiffnessSource {
  public:
-  StiffnessSource(const Model& model, bool worker_thread);
+  // touch_lookahead (s): of the stiffness at first touch (ContactStiffness::set_touch_lookahead,
+  // docs/physics.md (2.22)), headless. The worker sets its own before each evaluation: how
+  // long a stiffness at first touch serves, half an evaluation out of contact (the one
+  // under way at the touch) and one in contact (the first after it), from the averages
+  // of its own durations.
+  StiffnessSource(const Model& model, bool worker_thread, double touch_lookahead = 0.0);
   ~StiffnessSource();  // joins the worker
   StiffnessSource(const StiffnessSource&) = delete;
   StiffnessSource& operator=(const StiffnessSource&) = delete;
@@ -76,6 +81,9 @@ class StiffnessSource {
 Mat3 passive_stiffness(const Mat3& K);
 
 LocalModel contact_model_now(const State& state, const LocalContactModel& newest);
+// The same rule for a tool at `centre` with `contact_force`, touching or not.
+LocalModel contact_model_now(const Vec3& centre, const Vec3& contact_force, bool touching,
+                             const LocalContactModel& newest);
 
 // renderForce (Frame.renderForce) as a function of the device position, from the
 // contact model of the tool. Position mode, with the tool quasi-static over a servo

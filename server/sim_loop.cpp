@@ -191,7 +191,8 @@ void Simulation::prepare_and_build() {
   initial_coupling_ = coupling_;
   state_ = std::make_unique<State>(make_state(*model_, options_));
   divergence_bound_ = divergence_bound(*model_);
-  if (config_.contact_stiffness) stiffness_ = std::make_unique<StiffnessSource>(*model_, !config_.headless);
+  if (config_.contact_stiffness)
+    stiffness_ = std::make_unique<StiffnessSource>(*model_, !config_.headless, config_.touch_lookahead);
   if (config_.haptic_rate_hz > 0.0 && !config_.headless)
     haptic_ = std::make_unique<HapticRenderer>(config_.haptic_rate_hz, config_.device.max_force, config_.spin_margin_us,
                                                config_.try_realtime, wake_fd_);
@@ -445,7 +446,9 @@ void Simulation::fill_local_models(Snapshot& s) const {
     m.tick = -1;
     return m;
   }();
-  s.contact_model = contact_model_now(state, stiffness_ ? stiffness_->newest() : none);
+  s.tool_touching = !state.contact_index.empty();
+  s.stiffness_source = stiffness_ ? stiffness_->newest() : none;
+  s.contact_model = contact_model_now(state, s.stiffness_source);
   // The render model's radius in contact: half the model's smallest particle spacing.
   s.render_model = render_model(s.contact_model, position_mode_, state.tool_target, s.render_force,
                                 options_.coupling, 0.5 * model_->min_spacing);

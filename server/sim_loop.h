@@ -75,6 +75,10 @@ struct SimConfig {
   // Compute the contact stiffness of the frames' local models (StiffnessSource): on a
   // worker thread in real time, at each publish when headless. Off: stiffness zero.
   bool contact_stiffness = true;
+  // The stiffness at first touch's lookahead (s, docs/physics.md (2.22),
+  // ContactStiffness::set_touch_lookahead): headless, this fixed time (0: at the touch);
+  // in real time the worker sets it from its own evaluations' durations.
+  double touch_lookahead = 0.0;
   // Where the stored finite-block references are (palpate-reference --out): the one whose
   // key matches the session's scene is read on the session's thread at its start and
   // given to clients (SessionInfo.reference*). Empty: none looked up.

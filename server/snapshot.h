@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/contact_stiffness.h"
 #include "core/types.h"
 
 namespace palpate::server {
@@ -37,6 +38,11 @@ struct Snapshot {
   Vec3 render_force{0, 0, 0};          // N, for the device (wire Frame.renderForce)
   bool force_saturated = false;
   LocalModel contact_model, render_model;
+  // Server-side only (not on the wire): what contact_model was made from, the tool's
+  // contact state and the newest contact stiffness (server/local_model.h
+  // contact_model_now), so a study can render a frame with another step's stiffness.
+  bool tool_touching = false;          // the state has particles in contact
+  LocalContactModel stiffness_source;  // tick -1: none yet
   double indentation = 0.0;            // m
   uint64_t command_seq = 0;
   uint32_t recoveries = 0;

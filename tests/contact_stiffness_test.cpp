@@ -356,6 +356,58 @@ TEST(ContactStiffness, TheStiffnessAtFirstTouchPredictsTheForceOfTheTouch) {
   }
 }
 
+// The lookahead of the stiffness at first touch (2.22): a tool coming down at v over a
+// particle, with the touch stiffness to serve for T, is given the stiffness of the
+// particles within d*/2 of the sphere, d* = v T / 2. Against the truth, the finite
+// differences of static solves held d* past the touch, its K_zz is much nearer than the
+// one particle's of (2.20); a tool that does not approach (moving sideways and away) gets
+// the touch's own.
+TEST(ContactStiffness, TheLookaheadTakesTheTouchStiffnessAtTheDepthItWillServe) {
+  // The 8^3 cube under a 1.5 m sphere: its four lattice neighbours are 0.0275 m up the
+  // sphere when a particle touches, the diagonal ones 0.055 m.
+  const std::string json = std::string(kMlsCube).substr(0, std::string(kMlsCube).rfind('}')) +
+                           R"(, "indenter": {"radius": 1.5}})";
+  test::Setup s = test::setup_from_json(json.c_str());
+  const Model& m = s.model;
+  const State rest = make_state(m, s.opt);
+  const double x = 1.0 / 7, y = 1.0 / 7;  // over a surface particle of the 8^3 lattice
+  const Vec3 touch(x, y, touch_height(m, x, y));
+  State above = rest;
+  above.indenter_center = touch + Vec3(0, 0, 2e-3);
+  const double v = 0.2, T = 0.8, depth = 0.5 * v * T;  // m/s, s: d* = 0.08 m
+  ContactStiffness at_touch(m, {1e-10, 2000, true}), ahead(m, {1e-10, 2000, true});
+  ahead.set_touch_lookahead(T);
+  above.indenter_velocity = Vec3(0, 0, -v);
+  const LocalContactModel one = at_touch.evaluate(m, above), five = ahead.evaluate(m, above);
+  ASSERT_TRUE(one.converged && five.converged);
+  EXPECT_EQ(one.touch_count, 1);
+  EXPECT_EQ(five.touch_count, 5);  // the particle and its four neighbours: 0.0275 < d*/2 < 0.055
+  const State held = held_at(s, rest, touch - Vec3(0, 0, depth));
+  const double h = 2e-3;
+  const double truth = (held_at(s, held, held.indenter_center + Vec3(0, 0, h)).indenter_contact_force[2] -
+                        held_at(s, held, held.indenter_center - Vec3(0, 0, h)).indenter_contact_force[2]) /
+                       (2 * h);
+  std::printf("K_zz %.4g N/m at d* = %.2f m (finite differences, %zu in contact); lookahead %.4g (%d particles), "
+              "at the touch %.4g\n",
+              truth, depth, held.contact_index.size(), five.touch_stiffness(2, 2), five.touch_count,
+              one.touch_stiffness(2, 2));
+  const double error_ahead = std::abs(five.touch_stiffness(2, 2) - truth) / std::abs(truth);
+  const double error_touch = std::abs(one.touch_stiffness(2, 2) - truth) / std::abs(truth);
+  // Measured: 34 % against 83 %. The rule is the continuum's (Hertz: the contact reaches
+  // the undeformed gap d/2); on this coarse lattice the diagonal particles, 0.055 m up,
+  // are in contact too at d* (9, not 5), so the lookahead's K stays short of the truth.
+  EXPECT_LT(error_ahead, 0.4);
+  EXPECT_LT(error_ahead, 0.5 * error_touch);
+  // Not approaching: the touch itself.
+  above.indenter_velocity = Vec3(0.3, 0, 0.2);
+  ahead.clear_warm_start();
+  const LocalContactModel away = ahead.evaluate(m, above);
+  EXPECT_EQ(away.touch_count, 1);
+  EXPECT_LT(max_abs(away.touch_stiffness - one.touch_stiffness), 1e-6 * max_abs(one.touch_stiffness));
+  EXPECT_THROW(ahead.set_touch_lookahead(-1.0), std::invalid_argument);
+  EXPECT_THROW(ahead.set_touch_lookahead(std::nan("")), std::invalid_argument);
+}
+
 TEST(ContactStiffness, VerticalStiffnessAgreesWithTheExactLinearSolveAndHertz) {
   // The graded linear hex FEM (within 1 % of the finite-block reference): its exact linear
   // solve (5.2)-(5.3) at F +- 1 N gives dF/dd independently (vertical gaps, undeformed

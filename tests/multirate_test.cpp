@@ -165,9 +165,16 @@ TEST(Multirate, TheLocalModelBeatsTheHoldAgainstTheFineRun) {
   c.haptic_rate_hz = 1000;
   c.model_dt = 0.004;
   c.seconds = 12;
+  c.stiffness_lags = {0};
   const MultirateResult r = run_multirate_study(c);
   ASSERT_GT(r.samples.size(), 11000u);
   ASSERT_GT(r.peak, 100.0);  // it pressed
+  // The study's emulation of a lagging stiffness (the server's contact_model_now on the
+  // frames' stiffness_source) is, at lag 0, the session's own render, to the bit.
+  for (const auto& s : r.samples) {
+    ASSERT_EQ(s.lagged.size(), 1u);
+    ASSERT_EQ(s.lagged[0], s.multirate) << "t = " << s.t;
+  }
   for (const haptic::Motion motion : {haptic::Motion::press, haptic::Motion::lift}) {
     std::vector<double> local, hold;
     for (const auto& s : r.samples)
