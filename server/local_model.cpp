@@ -35,6 +35,13 @@ StiffnessSource::~StiffnessSource() {
   thread_.join();
 }
 
+void StiffnessSource::prime(const State& state) {
+  if (!threaded_) return;
+  // The worker waits for its first input (pending_ is false), so stiffness_ is ours here.
+  newest_ = stiffness_.evaluate(model_, state);
+  evaluations_.fetch_add(1, std::memory_order_relaxed);
+}
+
 void StiffnessSource::offer(const State& state) {
   if (!threaded_) {
     newest_ = stiffness_.evaluate(model_, state);

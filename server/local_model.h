@@ -35,6 +35,11 @@ class StiffnessSource {
   StiffnessSource(const StiffnessSource&) = delete;
   StiffnessSource& operator=(const StiffnessSource&) = delete;
 
+  // Before the loop's first offer(), on the session's thread: evaluates `state` there and
+  // then (the first evaluation is a cold one, a tenth of a second on the graded cube), so
+  // a real-time session's first frames already carry a stiffness (and the worker starts
+  // warm). Headless, nothing: every offer() evaluates.
+  void prime(const State& state);
   // The state just stepped (and published).
   void offer(const State& state);
   // The state jumped (reset, a recovered blow-up): results and warm starts from before

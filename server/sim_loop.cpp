@@ -191,8 +191,10 @@ void Simulation::prepare_and_build() {
   initial_coupling_ = coupling_;
   state_ = std::make_unique<State>(make_state(*model_, options_));
   divergence_bound_ = divergence_bound(*model_);
-  if (config_.contact_stiffness)
+  if (config_.contact_stiffness) {
     stiffness_ = std::make_unique<StiffnessSource>(*model_, !config_.headless, config_.touch_lookahead);
+    stiffness_->prime(*state_);
+  }
   if (config_.haptic_rate_hz > 0.0 && !config_.headless)
     haptic_ = std::make_unique<HapticRenderer>(config_.haptic_rate_hz, config_.device.max_force, config_.spin_margin_us,
                                                config_.try_realtime, wake_fd_);

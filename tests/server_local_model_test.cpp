@@ -8,7 +8,10 @@
 #include <Eigen/LU>
 #include <gtest/gtest.h>
 
+#include "core/contact_stiffness.h"
+#include "core/state.h"
 #include "server/local_model.h"
+#include "test_util.h"
 
 namespace {
 
@@ -167,3 +170,26 @@ TEST(LocalModel, TheStiffnessAtFirstTouchServesUntilOneInContactArrives) {
   EXPECT_TRUE(contact_model_now(approaching, in_contact).stiffness.isZero(0.0));
   EXPECT_EQ(contact_model_now(now, in_contact).stiffness, in_contact.stiffness);
 }
+
+// A real-time source (its worker thread) primed with the start state holds that state's
+// evaluation at once, the one ContactStiffness gives with the renderer's settings; a
+// headless one is left to its first offer.
+TEST(StiffnessSource, PrimingGivesTheFirstFramesAStiffness) {
+  const palpate::test::Setup s = palpate::test::setup_from_json(
+      R"({"body": {"distribution": {"type": "grid", "per_edge": 6}}, "integrator": {"type": "symplectic_euler", "dt": 0.001}})");
+  const palpate::State start = palpate::make_state(s.model, s.opt);
+  palpate::server::StiffnessSource threaded(s.model, true), headless(s.model, false);
+  EXPECT_EQ(threaded.newest().tick, -1);
+  threaded.prime(start);
+  headless.prime(start);
+  EXPECT_EQ(headless.newest().tick, -1);
+  EXPECT_EQ(headless.evaluations(), 0u);
+  ASSERT_EQ(threaded.newest().tick, start.tick);
+  EXPECT_EQ(threaded.evaluations(), 1u);
+  palpate::ContactStiffness direct(s.model, palpate::kRenderingStiffness);
+  const palpate::LocalContactModel expected = direct.evaluate(s.model, start);
+  EXPECT_EQ(threaded.newest().touch_count, expected.touch_count);
+  EXPECT_GT(expected.touch_count, 0);  // the tool starts touching the lattice's top
+  EXPECT_EQ(threaded.newest().touch_stiffness, expected.touch_stiffness);
+}
+
