@@ -198,6 +198,7 @@ int main(int argc, char** argv) {
   j["ticks"] = ticks;
   j["tolerance"] = settings.tolerance;
   j["coarse_per_axis"] = settings.coarse_per_axis;
+  j["coarse_lattice"] = {stiffness.coarse_lattice()[0], stiffness.coarse_lattice()[1], stiffness.coarse_lattice()[2]};
   j["construction_ms"] = build_ms;
   j["press_seconds"] = press_s;
   j["rest_indentation"] = rest.indentation;
@@ -231,9 +232,12 @@ int main(int argc, char** argv) {
               "iterations from zero\n",
               force, press_s, rest.indentation, first.active_count, first.stiffness(2, 2), first.valid_radius,
               to_string(first.limited_by), first.cg_iterations);
+  const Eigen::Vector3i lattice = stiffness.coarse_lattice();
   std::printf("preconditioner: block Jacobi%s (construction %.1f ms)\n",
-              settings.coarse_per_axis ? (" + coarse lattice " + std::to_string(settings.coarse_per_axis) + "^3").c_str()
-                                       : "",
+              lattice[0] > 0 ? (" + coarse lattice " + std::to_string(lattice[0]) + " x " + std::to_string(lattice[1]) +
+                                " x " + std::to_string(lattice[2]))
+                                   .c_str()
+                             : "",
               build_ms);
   std::printf("%d ticks, command %g +- %g N over %g s; medians (p90, max), single thread:\n", ticks, force, amplitude,
               period);

@@ -185,6 +185,7 @@ void ContactStiffness::build_coarse_correction(const Model& model, int per_axis)
   coarse_rhs_.setZero(unknowns, 3);
   coarse_solution_.setZero(unknowns, 3);
   coarse_nodes_ = nodes;
+  coarse_lattice_ = Eigen::Vector3i(nx, ny, static_cast<int>(axis[2].size()));
 }
 
 void ContactStiffness::set_touch_lookahead(double seconds) {

@@ -116,6 +116,8 @@ class ContactStiffness {
   // and what a headless session uses): at the touch itself (2.20). Throws
   // std::invalid_argument on a negative or non-finite value.
   void set_touch_lookahead(double seconds);
+  // The coarse lattice of the preconditioner (2.21) as built: nodes per axis (0: none).
+  Eigen::Vector3i coarse_lattice() const { return coarse_lattice_; }
   double touch_lookahead() const { return touch_lookahead_; }
 
   // The particles' quasi-static response of the last evaluate() to a unit tool
@@ -165,6 +167,7 @@ class ContactStiffness {
   // The coarse correction (2.21): trilinear interpolation T from a coarse lattice (nodes at
   // the quantiles of the particles' coordinates along each axis), 8 nodes per particle.
   int coarse_nodes_ = 0;                   // 0: none
+  Eigen::Vector3i coarse_lattice_{0, 0, 0};  // nodes per axis
   std::vector<int> coarse_node_;           // 8n: the coarse nodes of particle i's cell
   std::vector<double> coarse_weight_;      // 8n: their trilinear weights (0 at fixed particles)
   Eigen::MatrixXd coarse_inverse_;         // A_c^-1, A_c = T^T K_0 T (3 coarse_nodes_ unknowns)

@@ -528,6 +528,10 @@ TEST(ContactStiffness, TheCoarseCorrectionCutsIterationsAndLeavesKUnchanged) {
   const Model& m = t.setup.model;
   ASSERT_GT(t.local.active_count, 0);
   ContactStiffness jacobi(m, {1e-10, 20000, false, 0}), coarse(m, {1e-10, 20000, false, 4});
+  EXPECT_EQ(jacobi.coarse_lattice(), Eigen::Vector3i(0, 0, 0));
+  EXPECT_EQ(coarse.coarse_lattice(), Eigen::Vector3i(4, 4, 4));
+  // The default asks for 6 per axis, at most a third of the cloud's 11: 4.
+  EXPECT_EQ(ContactStiffness(m).coarse_lattice(), Eigen::Vector3i(4, 4, 4));
   const LocalContactModel a = jacobi.evaluate(m, t.state), b = coarse.evaluate(m, t.state);
   ASSERT_TRUE(a.converged && b.converged);
   EXPECT_LT(max_abs(a.stiffness - b.stiffness), 1e-8 * max_abs(a.stiffness)) << a.stiffness << "\n" << b.stiffness;
