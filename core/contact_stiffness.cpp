@@ -103,6 +103,9 @@ ContactStiffness::ContactStiffness(const Model& model, ContactStiffnessSettings 
     for (int j = 0; j < 3; ++j) p[j].setZero(3, n);
   for (Points& p : response_) p.setZero(3, n);
   multiplier_response_.setZero(n, 3);
+  last_position_.setZero(3, n);
+  last_contact_index_.reserve(n);
+  last_multiplier_.reserve(n);
   if (settings.coarse_per_axis > 0) {
     // At most about a third of the cloud's nodes per axis: a coarser lattice than that costs
     // more per iteration than it saves (2.21).
@@ -197,6 +200,35 @@ void ContactStiffness::set_touch_lookahead(double seconds) {
 
 void ContactStiffness::clear_warm_start() {
   for (Points& p : response_) p.setZero();
+  have_last_ = false;
+}
+
+double ContactStiffness::touch_depth(const CarriedState& state, const Vec3& nearest) const {
+  return 0.5 * std::max(0.0, state.indenter_velocity.dot(nearest)) * touch_lookahead_;
+}
+
+bool ContactStiffness::same_as_last(const Model& model, const CarriedState& state) const {
+  const double tolerance = 1e-6 * model.min_spacing;
+  if ((state.indenter_center - last_centre_).cwiseAbs().maxCoeff() > tolerance) return false;
+  if (state.contact_index != last_contact_index_) return false;
+  double largest = 0.0;
+  for (const double mu : last_multiplier_) largest = std::max(largest, std::abs(mu));
+  for (size_t k = 0; k < last_multiplier_.size(); ++k)
+    if (std::abs(state.contact_normal_force[k] - last_multiplier_[k]) > 1e-6 * largest) return false;
+  if (last_.active_count == 0 && last_.touch_count > 0 &&
+      std::abs(touch_depth(state, last_.limiting_direction) - last_touch_depth_) > tolerance)
+    return false;
+  return (state.position - last_position_).cwiseAbs().maxCoeff() <= tolerance;
+}
+
+void ContactStiffness::remember(const CarriedState& state, const LocalContactModel& result) {
+  last_position_ = state.position;  // the same size: no allocation
+  last_centre_ = state.indenter_center;
+  last_contact_index_.assign(state.contact_index.begin(), state.contact_index.end());  // capacity n
+  last_multiplier_.assign(state.contact_normal_force.begin(), state.contact_normal_force.end());
+  last_touch_depth_ = touch_depth(state, result.limiting_direction);
+  last_ = result;
+  have_last_ = true;
 }
 
 void ContactStiffness::project(Points& w) const {
@@ -438,6 +470,26 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
     throw std::invalid_argument("ContactStiffness::evaluate: state.contact_normal_force has " +
                                 std::to_string(state.contact_normal_force.size()) +
                                 " entries, state.contact_index " + std::to_string(state.contact_index.size()));
+  if (state.contact_index.size() > static_cast<size_t>(n))
+    throw std::invalid_argument("ContactStiffness::evaluate: state.contact_index has " +
+                                std::to_string(state.contact_index.size()) + " entries, more than the " +
+                                std::to_string(n) + " particles");
+  if (have_last_ && same_as_last(model, state)) {
+    LocalContactModel out = last_;
+    out.tick = state.tick;
+    out.origin = state.indenter_center;
+    out.force = state.indenter_contact_force;
+    out.cg_iterations = 0;
+    out.reused = true;
+    return out;
+  }
+  const LocalContactModel out = evaluate_anew(model, state);
+  remember(state, out);
+  return out;
+}
+
+LocalContactModel ContactStiffness::evaluate_anew(const Model& model, const CarriedState& state) {
+  const int n = n_;
   const Vec3 c = state.indenter_center;
   const double R = model.indenter_radius;
   LocalContactModel out;
@@ -485,9 +537,7 @@ LocalContactModel ContactStiffness::evaluate(const Model& model, const CarriedSt
     // the smallest spacing) active with zero multipliers; with a lookahead (2.22), those
     // within half the depth d* = v_n T / 2 the tool reaches halfway through the time T it
     // will serve, at its approach speed v_n toward the nearest particle.
-    const double approach = std::max(0.0, state.indenter_velocity.dot(out.limiting_direction));
-    const double depth = 0.5 * approach * touch_lookahead_;
-    const double band = std::max(1e-3 * model.min_spacing, 0.5 * depth);
+    const double band = std::max(1e-3 * model.min_spacing, 0.5 * touch_depth(state, out.limiting_direction));
     for (int j = 0; j < n; ++j) {
       if (!movable_[j]) continue;
       const Vec3 d = state.position.col(j) - c;

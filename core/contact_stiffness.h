@@ -46,6 +46,7 @@ struct LocalContactModel {
   int64_t tick = 0;               // the state's tick it was computed at
   int active_count = 0;           // particles in contact (the active set of (2.7))
   int cg_iterations = 0;          // projected CG iterations of the three solves (2.10)
+  bool reused = false;            // the state was the last evaluation's: its result, recomputed nothing
   bool converged = true;          // all three solves met the tolerance
   // Which bound set valid_radius, and where and along which direction it is reached.
   enum class Limit {
@@ -108,6 +109,11 @@ class ContactStiffness {
   // Forgets the warm starts: the next evaluate() starts its solves from zero (after a
   // restored checkpoint, a new scene state, or to time a cold evaluation).
   void clear_warm_start();
+  // A state that is the last evaluation's to within 10^-6 of the smallest particle spacing
+  // (every position, the tool's centre, and the depth of the touch's lookahead), with the
+  // same contact set and multipliers within 10^-6 of their largest, gets the last result
+  // again (LocalContactModel::reused, with the new tick) without a tangent sweep: a tool
+  // held still, or away from a body at rest, costs a comparison, not an evaluation.
 
   // With touch_stiffness: how long (s) the stiffness at first touch will serve a renderer
   // after the touch, until an evaluation in contact replaces it (about a worker's
@@ -153,6 +159,21 @@ class ContactStiffness {
   int n_ = 0;
   ContactStiffnessSettings settings_;
   double touch_lookahead_ = 0.0;  // s (2.22)
+  // The last evaluation's input and result (same_as_last).
+  bool have_last_ = false;
+  Points last_position_;
+  Vec3 last_centre_{0, 0, 0};
+  double last_touch_depth_ = 0.0;
+  std::vector<int> last_contact_index_;
+  std::vector<double> last_multiplier_;
+  LocalContactModel last_;
+  // Whether `state` is the last evaluation's (see clear_warm_start); keeping this one's.
+  bool same_as_last(const Model& model, const CarriedState& state) const;
+  void remember(const CarriedState& state, const LocalContactModel& result);
+  // d* of (2.22): half the tool's approach speed toward `nearest` (unit) times the lookahead.
+  double touch_depth(const CarriedState& state, const Vec3& nearest) const;
+  // evaluate() without the check for an unchanged state.
+  LocalContactModel evaluate_anew(const Model& model, const CarriedState& state);
   Workspace tangent_;  // the tangent's linearisation point (solid.h); only tangent_F / tangent_S_or_R are used
   std::vector<uint8_t> movable_;        // n: 1 = free particle, 0 = fixed
   std::vector<Mat3> diagonal_;          // n: D_i, the reference tangent's 3x3 diagonal block

@@ -107,13 +107,15 @@ void StiffnessSource::run() {
     }
     evaluations_.fetch_add(1, std::memory_order_relaxed);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-    double& average = result.active_count > 0 ? seconds_in_contact : seconds_out_of_contact;
-    average = average > 0.0 ? 0.75 * average + 0.25 * seconds : seconds;
+    if (!result.reused) {  // a reused result took no time: it says nothing of the next evaluation's
+      double& average = result.active_count > 0 ? seconds_in_contact : seconds_out_of_contact;
+      average = average > 0.0 ? 0.75 * average + 0.25 * seconds : seconds;
+    }
     // The worker's own thread (never the loop's): --log-level debug shows each evaluation.
     spdlog::debug("contact stiffness: tick {}, {} active, {} at first touch (lookahead {:.1f} ms), {} CG iterations, "
-                  "{:.1f} ms",
+                  "{:.1f} ms{}",
                   result.tick, result.active_count, result.touch_count, 1e3 * stiffness_.touch_lookahead(),
-                  result.cg_iterations, 1e3 * seconds);
+                  result.cg_iterations, 1e3 * seconds, result.reused ? " (unchanged state: the last result)" : "");
     std::lock_guard<std::mutex> lock(mutex_);
     result_ = result;
     result_generation_ = generation;

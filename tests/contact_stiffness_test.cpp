@@ -546,5 +546,59 @@ TEST(ContactStiffness, TheCoarseCorrectionCutsIterationsAndLeavesKUnchanged) {
   EXPECT_THROW(ContactStiffness(m, {1e-6, 100, false, 13}), std::invalid_argument);
 }
 
+
+// An unchanged state (a tool held still, a body at rest) gets the last result again
+// without a tangent sweep, and allocates nothing; a particle moved by 10^-3 of the
+// smallest spacing, a changed multiplier or a cleared warm start make it evaluate anew,
+// and that result equals a fresh instance's.
+TEST(ContactStiffness, AnUnchangedStateReusesTheLastResult) {
+  Site t = site(kMlsCube, 0.07, 0.03, 0.03);
+  const Model& m = t.setup.model;
+  ContactStiffness cs(m, kRenderingStiffness);
+  const LocalContactModel first = cs.evaluate(m, t.state);
+  EXPECT_FALSE(first.reused);
+  State later = t.state;
+  later.tick += 7;
+  later.position.col(0) += Vec3(0, 0, 1e-7 * m.min_spacing);  // below the 1e-6 tolerance
+  const long before = g_allocations.load();
+  const LocalContactModel again = cs.evaluate(m, later);
+  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_TRUE(again.reused);
+  EXPECT_EQ(again.tick, later.tick);
+  EXPECT_EQ(again.cg_iterations, 0);
+  EXPECT_EQ(again.stiffness, first.stiffness);
+  EXPECT_EQ(again.valid_radius, first.valid_radius);
+  auto expect_anew = [&](const State& s, const char* what) {
+    SCOPED_TRACE(what);
+    const LocalContactModel r = cs.evaluate(m, s);
+    EXPECT_FALSE(r.reused);
+    ContactStiffness fresh(m, kRenderingStiffness);
+    const LocalContactModel f = fresh.evaluate(m, s);
+    EXPECT_LT(max_abs(r.stiffness - f.stiffness), 1e-2 * max_abs(f.stiffness));
+  };
+  State moved = t.state;
+  const int free_particle = t.state.contact_index[0];
+  moved.position.col(free_particle) += Vec3(1e-3 * m.min_spacing, 0, 0);
+  expect_anew(moved, "a particle moved");
+  State pressed = t.state;
+  pressed.contact_normal_force[0] *= 1.01;
+  expect_anew(pressed, "a multiplier changed");
+  cs.clear_warm_start();
+  expect_anew(pressed, "the warm start cleared");
+  // Out of contact, the same holds for the stiffness at first touch.
+  State above = make_state(m, t.setup.opt);
+  above.indenter_center = Vec3(0.07, 0.03, touch_height(m, 0.07, 0.03) + 1e-3);
+  ContactStiffness touching(m, kRenderingStiffness);
+  const LocalContactModel out_of_contact = touching.evaluate(m, above);
+  ASSERT_GT(out_of_contact.touch_count, 0);
+  const LocalContactModel out_again = touching.evaluate(m, above);
+  EXPECT_TRUE(out_again.reused);
+  EXPECT_EQ(out_again.touch_stiffness, out_of_contact.touch_stiffness);
+  // Approaching with a lookahead changes the touch's depth: anew.
+  touching.set_touch_lookahead(0.5);
+  above.indenter_velocity = Vec3(0, 0, -0.05);
+  EXPECT_FALSE(touching.evaluate(m, above).reused);
+}
+
 }  // namespace
 }  // namespace palpate
