@@ -6,8 +6,9 @@
 //   f_int(x) + sum_i p_i n_i = 0,   g_i = |x_i - c| - R >= 0,  p_i >= 0,  p_i g_i = 0,   (5.7)
 // n_i = (x_i - c) / |x_i - c|, solved by the augmented Lagrangian (5.8): Newton on
 //   Pi(x) + sum_i (max(0, lambda_i - k g_i)^2 - lambda_i^2) / (2 k)
-// with the tangent assembled exactly (analysis/assembled_tangent.h) plus k n_i n_i^T on
-// the nodes in contact, factorised by CHOLMOD, an energy line search, and the update
+// with the tangent assembled exactly (analysis/assembled_tangent.h) plus the contact term's
+// Hessian k n_i n_i^T - p_i (I - n_i n_i^T) / |x_i - c| on the nodes in contact, factorised
+// by CHOLMOD, an energy line search, and the update
 // lambda_i <- max(0, lambda_i - k g_i) until the penetration is below tolerance.
 // The tool is displacement-controlled, so the path through large depths has no limit
 // point; the depth is reached in increments from the previous solution, each started from

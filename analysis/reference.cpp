@@ -333,6 +333,7 @@ Reference large_strain_reference(const Scene& scene, const std::vector<double>& 
     level.nodes = model.particle_count;
     level.first_spacing = first_spacing;
     int iterations = 0;
+    std::vector<double> contact_radius;
     for (double d : depths) {
       const HeldToolSolution sol = statics.solve(model.indenter_start - Vec3(0, 0, d));
       if (!sol.converged)
@@ -341,6 +342,12 @@ Reference large_strain_reference(const Scene& scene, const std::vector<double>& 
       level.forces.push_back(multiplicity * sol.tool_force[2]);
       level.indentation.push_back(d);
       iterations += sol.newton_iterations;
+      // The contact radius: the farthest pressed node from the tool's axis (deformed).
+      double radius = 0;
+      for (int i = 0; i < model.particle_count; ++i)
+        if (statics.contact_pressure()[i] > 0)
+          radius = std::max(radius, (statics.positions().col(i).head<2>() - model.indenter_start.head<2>()).norm());
+      contact_radius.push_back(radius);
     }
     level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (progress) {
@@ -349,6 +356,8 @@ Reference large_strain_reference(const Scene& scene, const std::vector<double>& 
         << " nodes, spacing at the site " << first_spacing << " m, " << iterations
         << " Newton iterations in all): " << level.seconds << " s; F (N) at the depths:";
       for (double F : level.forces) o << " " << F;
+      o << "; contact radius (m):";
+      for (double a : contact_radius) o << " " << a;
       progress(o.str());
     }
     ref.levels.push_back(std::move(level));
