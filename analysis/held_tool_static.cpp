@@ -91,7 +91,8 @@ struct HeldToolStatics::Impl {
   // extrapolation inverts an element); then every free node inside the sphere, or kept pressed
   // by the extrapolation, is put on its surface along the radius. Without this each increment
   // begins with the tool's whole step as penetration under a stiff penalty, and Newton
-  // wanders among contact sets (or crushes the bricks of a fine lattice) before it converges.
+  // wanders among contact sets before it converges. Only the path changes: the solution is
+  // the same to the tolerances (tests/held_tool_static_test.cpp, docs/verification.md).
   void predict(const Vec3& c) {
     x = x_last;
     lambda = pressure_last;
@@ -115,8 +116,9 @@ struct HeldToolStatics::Impl {
       for (int a = 0; a < 3; ++a)
         if (free_dof[3 * i + a] < 0) moved[a] = x(a, i);  // a mirror's component stays
       trial.col(i) = moved;
-      // Pressed from the start (p = lambda at g = 0), so the first tangent holds the node
-      // on the sphere instead of letting the step push it deep into the penalty.
+      // Pressed from the start where round-off leaves g <= 0 (p = lambda - k g > 0), so the
+      // first tangent holds the node on the sphere instead of letting the step push it deep
+      // into the penalty; where g comes out a hair positive the node starts free (slower only).
       lambda[i] = std::max(lambda[i], 1e-30);
     }
     if (std::isfinite(elastic_energy(model, trial)))
