@@ -15,12 +15,21 @@ namespace palpate {
 
 namespace {
 
-std::vector<int> free_dofs_of(const Model& model, int& count) {
+std::vector<int> free_dofs_of(const Model& model, const std::vector<int>& mirror_axes, int& count) {
   std::vector<int> free_dof(3 * static_cast<size_t>(model.particle_count), -1);
+  const double tolerance = 1e-9 * (model.rest_position.rowwise().maxCoeff() -
+                                   model.rest_position.rowwise().minCoeff()).maxCoeff();
+  for (int a : mirror_axes)
+    if (a < 0 || a > 1) throw std::invalid_argument("held tool: a mirror axis is 0 (x) or 1 (y)");
   count = 0;
   for (int i = 0; i < model.particle_count; ++i)
     if (!model.fixed[i])
-      for (int c = 0; c < 3; ++c) free_dof[3 * i + c] = count++;
+      for (int c = 0; c < 3; ++c) {
+        bool on_mirror = false;
+        for (int a : mirror_axes)
+          on_mirror |= a == c && std::abs(model.rest_position(a, i) - model.indenter_start[a]) <= tolerance;
+        if (!on_mirror) free_dof[3 * i + c] = count++;
+      }
   return free_dof;
 }
 
@@ -36,6 +45,13 @@ struct HeldToolStatics::Impl {
   Workspace work;
   Points x, trial, f;                 // positions, a trial step, forces (3 x n)
   Vec3 centre;                        // the sphere's centre of the last solution
+  // The solution before the last (for the secant predictor), once there is one.
+  Points x_before;
+  Vec3 centre_before;
+  std::vector<double> pressure_before;
+  bool has_before = false;
+  Points x_last;                       // the last solution (x is overwritten by the predictor)
+  std::vector<double> pressure_last;
   double penalty = 0.0;               // k of (5.8), N/m
   std::vector<double> lambda, pressure;  // per node: multiplier estimate, p_i at x
   Eigen::VectorXd residual, step;
@@ -43,18 +59,20 @@ struct HeldToolStatics::Impl {
   bool pattern_analysed = false;
 
   Impl(const Model& m, const HeldToolOptions& o)
-      : model(m), opt(o), free_dof(free_dofs_of(m, free_count)), tangent(m, free_dof, free_count) {
+      : model(m), opt(o), free_dof(free_dofs_of(m, o.mirror_axes, free_count)), tangent(m, free_dof, free_count) {
     const double R = m.indenter_radius;
     const double E = m.lame_mu * (3 * m.lame_lambda + 2 * m.lame_mu) / (m.lame_lambda + m.lame_mu);
     if (opt.force_tolerance <= 0) opt.force_tolerance = 1e-9 * E * R * R;
     if (opt.gap_tolerance <= 0) opt.gap_tolerance = 1e-7 * R;
     if (opt.max_increment <= 0) opt.max_increment = 0.05 * R;
     x = m.rest_position;
+    x_last = x;
     trial = x;
     f.setZero(3, m.particle_count);
     centre = m.indenter_start;
     lambda.assign(m.particle_count, 0.0);
     pressure.assign(m.particle_count, 0.0);
+    pressure_last = pressure;
     residual.setZero(free_count);
     step.setZero(free_count);
     cholesky.cholmod().print = 0;  // an indefinite tangent is handled below, not printed
@@ -65,6 +83,48 @@ struct HeldToolStatics::Impl {
     double diagonal = 0;
     for (int k = 0; k < K.outerSize(); ++k) diagonal = std::max(diagonal, K.coeff(k, k));
     penalty = 100 * diagonal;
+  }
+
+  // The start of the solve at c: the secant extrapolation of the last two solutions along
+  // the tool's path, x + s (x - x_before), lambda = max(0, p + s (p - p_before)), with s the
+  // ratio of the tool's steps (the last solution itself when there is no earlier one, or the
+  // extrapolation inverts an element); then every free node inside the sphere, or kept pressed
+  // by the extrapolation, is put on its surface along the radius. Without this each increment
+  // begins with the tool's whole step as penetration under a stiff penalty, and Newton
+  // wanders among contact sets before it converges. Only the path changes: the solution is
+  // the same to the tolerances (tests/held_tool_static_test.cpp, docs/verification.md).
+  void predict(const Vec3& c) {
+    x = x_last;
+    lambda = pressure_last;
+    const double previous = (centre - centre_before).norm();
+    if (has_before && previous > 0) {
+      const double s = (c - centre).norm() / previous;
+      trial = x_last + s * (x_last - x_before);
+      if (std::isfinite(elastic_energy(model, trial))) {
+        x.swap(trial);
+        for (size_t i = 0; i < lambda.size(); ++i)
+          lambda[i] = std::max(0.0, pressure_last[i] + s * (pressure_last[i] - pressure_before[i]));
+      }
+    }
+    trial = x;
+    for (int i = 0; i < model.particle_count; ++i) {
+      if (model.fixed[i]) continue;
+      const Vec3 offset = x.col(i) - c;
+      const double distance = offset.norm();
+      if (!(lambda[i] > 0 || distance < model.indenter_radius) || !(distance > 0)) continue;
+      Vec3 moved = c + model.indenter_radius / distance * offset;
+      for (int a = 0; a < 3; ++a)
+        if (free_dof[3 * i + a] < 0) moved[a] = x(a, i);  // a mirror's component stays
+      trial.col(i) = moved;
+      // Pressed from the start where round-off leaves g <= 0 (p = lambda - k g > 0), so the
+      // first tangent holds the node on the sphere instead of letting the step push it deep
+      // into the penalty; where g comes out a hair positive the node starts free (slower only).
+      lambda[i] = std::max(lambda[i], 1e-30);
+    }
+    if (std::isfinite(elastic_energy(model, trial)))
+      x.swap(trial);
+    else
+      lambda = pressure_last;
   }
 
   // The augmented contact term of (5.8) at positions y: its energy, and p_i.
@@ -95,32 +155,69 @@ struct HeldToolStatics::Impl {
       if (model.fixed[i]) continue;
       Vec3 r = f.col(i);
       if (pressure[i] > 0) r += pressure[i] * (x.col(i) - c).normalized();
-      for (int a = 0; a < 3; ++a) residual[free_dof[3 * i + a]] = r[a];
-      worst = std::max(worst, r.norm());
+      double squared = 0;
+      for (int a = 0; a < 3; ++a)
+        if (const int k = free_dof[3 * i + a]; k >= 0) residual[k] = r[a], squared += r[a] * r[a];
+      worst = std::max(worst, std::sqrt(squared));  // a mirror's reaction is no residual
     }
     return worst;
+  }
+
+  // The 2-norm of the residual (5.7) over the free DOFs at positions y (uses f as scratch).
+  double residual_norm_at(const Points& y, const Vec3& c) {
+    elastic_forces(model, y, f);
+    const double R = model.indenter_radius;
+    double sum = 0;
+    for (int i = 0; i < model.particle_count; ++i) {
+      if (model.fixed[i]) continue;
+      Vec3 r = f.col(i);
+      const Vec3 offset = y.col(i) - c;
+      const double p = std::max(0.0, lambda[i] - penalty * (offset.norm() - R));
+      if (p > 0) r += p * offset.normalized();
+      for (int a = 0; a < 3; ++a)
+        if (free_dof[3 * i + a] >= 0) sum += r[a] * r[a];
+    }
+    return std::sqrt(sum);
   }
 
   bool newton_step(const Vec3& c, std::string& message) {
     SparseMatrix K;
     tangent.assemble(x, work, K);
-    // + k n n^T on the pressed nodes (lower triangle; the node's own block is in K's pattern).
-    std::vector<Eigen::Triplet<double>> extra;
-    for (int i = 0; i < model.particle_count; ++i) {
-      if (model.fixed[i] || pressure[i] <= 0) continue;
-      const Vec3 n = (x.col(i) - c).normalized();
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b <= a; ++b)
-          extra.emplace_back(free_dof[3 * i + a], free_dof[3 * i + b], penalty * n[a] * n[b]);
-    }
-    SparseMatrix P(free_count, free_count);
-    P.setFromTriplets(extra.begin(), extra.end());
-    K += P;
+    // + the contact term's Hessian on the pressed nodes (lower triangle; the node's own block
+    // is in K's pattern): k n n^T - p_i (I - n n^T) / |x_i - c|. The second part, the sphere's
+    // curvature under the pressure, keeps Newton quadratic (without it convergence is linear
+    // at a rate of about p_i / (|x_i - c| K_ii)); far from equilibrium, where the penalty's
+    // p_i are huge, it may make K indefinite, and then K is taken without it.
+    auto contact_hessian = [&](bool curvature) {
+      std::vector<Eigen::Triplet<double>> extra;
+      for (int i = 0; i < model.particle_count; ++i) {
+        if (model.fixed[i] || pressure[i] <= 0) continue;
+        const Vec3 offset = x.col(i) - c;
+        const double distance = offset.norm();
+        const Vec3 n = offset / distance;
+        Eigen::Matrix3d H = penalty * n * n.transpose();
+        if (curvature) H -= pressure[i] / distance * (Eigen::Matrix3d::Identity() - n * n.transpose());
+        for (int a = 0; a < 3; ++a)
+          for (int b = 0; b < 3; ++b) {
+            const int ka = free_dof[3 * i + a], kb = free_dof[3 * i + b];
+            if (ka >= 0 && kb >= 0 && kb <= ka) extra.emplace_back(ka, kb, H(a, b));
+          }
+      }
+      SparseMatrix P(free_count, free_count);
+      P.setFromTriplets(extra.begin(), extra.end());
+      return P;
+    };
+    const SparseMatrix elastic = K;
+    K = elastic + contact_hessian(true);
     if (!pattern_analysed) {
       cholesky.analyzePattern(K);
       pattern_analysed = true;
     }
     cholesky.factorize(K);
+    if (cholesky.info() != Eigen::Success) {
+      K = elastic + contact_hessian(false);
+      cholesky.factorize(K);
+    }
     // Far from equilibrium the neo-Hookean tangent of strongly compressed bricks may be
     // indefinite: then the step is taken with K + mu D (D the diagonal of K, mu raised
     // tenfold until the factorisation succeeds), a descent direction the line search can use.
@@ -141,17 +238,26 @@ struct HeldToolStatics::Impl {
     step = cholesky.solve(residual);
     // Energy line search: Armijo on the merit (5.8); near convergence, where the energy
     // changes at round-off, a step that lowers the residual is taken as it is.
+    // Near convergence the merit's change is below its round-off (the energies of all bricks
+    // summed): there a full step is taken when it lowers the residual's 2-norm, which the
+    // Newton step does quadratically; a step of round-off size on the merit alone stalls.
     const double m0 = merit(x, c), slope = -residual.dot(step);
+    const double r0 = residual.norm();
     double alpha = 1.0;
     for (int tries = 0; tries < 30; ++tries, alpha *= 0.5) {
       trial = x;
       for (int i = 0; i < model.particle_count; ++i)
-        if (!model.fixed[i])
-          for (int a = 0; a < 3; ++a) trial(a, i) += alpha * step[free_dof[3 * i + a]];
+        for (int a = 0; a < 3; ++a)
+          if (const int k = free_dof[3 * i + a]; k >= 0) trial(a, i) += alpha * step[k];
       const double m1 = merit(trial, c);
-      if (m1 <= m0 + 1e-4 * alpha * slope || (std::isfinite(m1) && std::abs(m1 - m0) <= 1e-12 * std::abs(m0)))
-        break;
+      if (m1 <= m0 + 1e-4 * alpha * slope) break;
+      if (std::isfinite(m1) && std::abs(m1 - m0) <= 1e-9 * std::abs(m0)) {
+        if (tries == 0 && residual_norm_at(trial, c) < r0) break;
+        if (std::abs(m1 - m0) <= 1e-12 * std::abs(m0)) break;
+      }
     }
+    spdlog::trace("held tool:     step with alpha {:.3g}, shift {:.1e}, {} pressed", alpha, shift,
+                  std::count_if(pressure.begin(), pressure.end(), [](double p) { return p > 0; }));
     x.swap(trial);
     return true;
   }
@@ -161,6 +267,7 @@ struct HeldToolStatics::Impl {
       bool inner = false;
       for (int it = 0; it <= opt.max_newton; ++it) {
         sol.residual = compute_residual(c);
+        spdlog::trace("held tool:     Newton {} residual {:.3e} N", it, sol.residual);
         if (sol.residual <= opt.force_tolerance) {
           inner = true;
           break;
@@ -169,6 +276,8 @@ struct HeldToolStatics::Impl {
         ++sol.newton_iterations;
         if (!newton_step(c, sol.message)) return;
       }
+      spdlog::debug("held tool: augmentation {} at centre z {:.6g} m: {} Newton iterations, residual {:.3e} N", aug,
+                    c[2], sol.newton_iterations, sol.residual);
       if (!inner) {
         sol.message = "Newton did not reach the force tolerance in " + std::to_string(opt.max_newton) +
                       " iterations (residual " + std::to_string(sol.residual) + " N)";
@@ -179,6 +288,7 @@ struct HeldToolStatics::Impl {
         if (!model.fixed[i])
           penetration = std::max(penetration, model.indenter_radius - (x.col(i) - c).norm());
       sol.max_penetration = penetration;
+      spdlog::debug("held tool:   penetration {:.3e} m", penetration);
       if (penetration <= opt.gap_tolerance) {
         sol.converged = true;
         return;
@@ -203,11 +313,18 @@ HeldToolSolution HeldToolStatics::solve(const Vec3& target) {
   for (int k = 1; k <= increments; ++k) {
     const Vec3 c = start + (target - start) * (static_cast<double>(k) / increments);
     sol.converged = false;
+    s.predict(c);
     s.solve_at(c, sol);
     if (!sol.converged) {
       sol.message = "at the increment " + std::to_string(k) + " of " + std::to_string(increments) + ": " + sol.message;
       return sol;
     }
+    s.x_before = s.x_last;
+    s.pressure_before = s.pressure_last;
+    s.centre_before = s.centre;
+    s.has_before = true;
+    s.x_last = s.x;
+    s.pressure_last = s.pressure;
     s.centre = c;
     spdlog::debug("held tool: increment {}/{} centre z {:.6g} m, {} Newton iterations so far", k, increments, c[2],
                   sol.newton_iterations);

@@ -6,11 +6,13 @@
 //   f_int(x) + sum_i p_i n_i = 0,   g_i = |x_i - c| - R >= 0,  p_i >= 0,  p_i g_i = 0,   (5.7)
 // n_i = (x_i - c) / |x_i - c|, solved by the augmented Lagrangian (5.8): Newton on
 //   Pi(x) + sum_i (max(0, lambda_i - k g_i)^2 - lambda_i^2) / (2 k)
-// with the tangent assembled exactly (analysis/assembled_tangent.h) plus k n_i n_i^T on
-// the nodes in contact, factorised by CHOLMOD, an energy line search, and the update
+// with the tangent assembled exactly (analysis/assembled_tangent.h) plus the contact term's
+// Hessian k n_i n_i^T - p_i (I - n_i n_i^T) / |x_i - c| on the nodes in contact, factorised
+// by CHOLMOD, an energy line search, and the update
 // lambda_i <- max(0, lambda_i - k g_i) until the penetration is below tolerance.
 // The tool is displacement-controlled, so the path through large depths has no limit
-// point; the depth is reached in increments from the previous solution.
+// point; the depth is reached in increments from the previous solution, each started from
+// the secant extrapolation of the last two solutions (positions and multipliers).
 #include <memory>
 #include <string>
 #include <vector>
@@ -26,11 +28,15 @@ struct HeldToolOptions {
   double max_increment = 0.0;     // m, the largest step of the tool between solves; 0 = 0.05 R
   int max_newton = 60;            // Newton iterations per augmentation
   int max_augmentations = 40;
+  // Mirror planes through the tool's axis: for each axis a listed (0 = x, 1 = y), the nodes
+  // whose rest coordinate a equals the tool start's keep u_a = 0 (a half or quarter of a
+  // body symmetric about those planes; tool_force is then the modelled part's).
+  std::vector<int> mirror_axes;
 };
 
 struct HeldToolSolution {
   bool converged = false;
-  Vec3 tool_force{0, 0, 0};       // N, the force of the body on the tool (z up when pressed)
+  Vec3 tool_force{0, 0, 0};       // N, the force of the (modelled part of the) body on the tool (z up when pressed)
   double residual = 0.0;          // N, largest net force on a free node
   double max_penetration = 0.0;   // m
   int active_count = 0;           // nodes pressed by the sphere

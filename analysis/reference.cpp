@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "core/hex_fem.h"
 #include "core/model.h"
 #include "core/node_cloud.h"
 #include "analysis/held_tool_static.h"
@@ -181,7 +182,76 @@ Scene level_scene(const Scene& scene, int per_edge, HexFormulation formulation, 
   return s;
 }
 
+// A level of the quarter-block family (LargeStrainLattice): the neo-Hookean bricks of the
+// quarter of the scene's block on the site's side x >= x_s, y >= y_s, on the lattice of three
+// core_graded_axis of per_edge nodes; the cut planes are free here (the mirror conditions are
+// the solver's, HeldToolOptions::mirror_axes).
+Model quarter_level_model(const Scene& scene, int per_edge, const LargeStrainLattice& lattice, double& spacing) {
+  const Eigen::Vector2d site = indenter_site(scene);
+  const uint32_t faces = scene.fixed_faces;
+  if (((faces & face_x_min) != 0) != ((faces & face_x_max) != 0) ||
+      ((faces & face_y_min) != 0) != ((faces & face_y_max) != 0))
+    throw std::invalid_argument("the quarter-block reference needs fixed faces symmetric about the site");
+  if (!scene.fixed_regions.empty() || !scene.material.inclusions.empty())
+    throw std::invalid_argument("the quarter-block reference needs a homogeneous body without fixed regions");
+  if (!scene.box_given || std::abs(site[0] - 0.5 * (scene.box.min[0] + scene.box.max[0])) > 1e-9 * scene.box.max.norm() ||
+      std::abs(site[1] - 0.5 * (scene.box.min[1] + scene.box.max[1])) > 1e-9 * scene.box.max.norm())
+    throw std::invalid_argument("the quarter-block reference is computed at the centre of the top face of a box");
+  const int intervals = per_edge - 1;
+  const int core = static_cast<int>(std::lround(lattice.core_share * intervals));
+  const double w = lattice.core_half_width;
+  spacing = w / core;
+  std::vector<double> coord[3] = {core_graded_axis(site[0], scene.box.max[0], intervals, core, w),
+                                  core_graded_axis(site[1], scene.box.max[1], intervals, core, w),
+                                  core_graded_axis(scene.box.max[2], scene.box.min[2], intervals, core, w)};
+  std::reverse(coord[2].begin(), coord[2].end());  // z ascending, the top face last
+  Scene s = level_scene(scene, per_edge, HexFormulation::neo_hookean, 0.0);
+  s.hex_fem.volumetric_integration = HexVolumetricIntegration::full;  // the bricks (5.4) integrate fully
+  s.box.min = Vec3(site[0], site[1], scene.box.min[2]);
+  s.fixed_faces = faces & ~(face_x_min | face_y_min);  // the cut planes: the solver's mirrors
+  // A plain lattice of the same size is built, then its nodes are moved onto the core-graded
+  // axes and the bricks rebuilt: the node order, the fixed faces (the axes' ends are exact) and
+  // the indenter's start on the site's node (the top face is flat) are the same.
+  s.distribution.type = DistributionType::grid;
+  s.distribution.first_spacing = 0.0;
+  s.indenter.position_given = true;
+  s.indenter.position = Vec3(site[0], site[1], scene.box.max[2] + scene.indenter.radius);
+  Model m = build_model(s);
+  int i = 0;
+  for (int c = 0; c < per_edge; ++c)
+    for (int b = 0; b < per_edge; ++b)
+      for (int a = 0; a < per_edge; ++a, ++i) m.rest_position.col(i) = Vec3(coord[0][a], coord[1][b], coord[2][c]);
+  m.hex = hex_mesh(m.rest_position, Eigen::Vector3i::Constant(per_edge), m.lame_lambda, m.lame_mu,
+                   HexFormulation::neo_hookean, HexVolumetricIntegration::full);
+  return m;
+}
+
 }  // namespace
+
+std::vector<double> core_graded_axis(double focus, double end, int intervals, int core_intervals, double core_length) {
+  const double length = std::abs(end - focus), sign = end >= focus ? 1.0 : -1.0;
+  if (!(core_intervals >= 1 && core_intervals < intervals))
+    throw std::invalid_argument("core-graded axis: the core needs at least one interval and one outside it (" +
+                                std::to_string(core_intervals) + " of " + std::to_string(intervals) + ")");
+  if (!(core_length > 0 && core_length < length))
+    throw std::invalid_argument("core-graded axis: the core of " + std::to_string(core_length) +
+                                " m does not fit a side of " + std::to_string(length) + " m");
+  const double h = core_length / core_intervals;
+  const int outer = intervals - core_intervals;
+  const double rest = length - core_length;
+  if (rest < outer * h * (1 - 1e-12))
+    throw std::invalid_argument("core-graded axis: " + std::to_string(outer) + " outer intervals of at least " +
+                                std::to_string(h) + " m do not fit the " + std::to_string(rest) +
+                                " m outside the core (the outer intervals would shrink)");
+  const double r = geometric_ratio(h, rest, outer);
+  std::vector<double> coord(intervals + 1);
+  coord[0] = focus;
+  for (int k = 1; k <= core_intervals; ++k) coord[k] = focus + sign * h * k;
+  double step = h, x = coord[core_intervals];
+  for (int k = core_intervals + 1; k <= intervals; ++k, step *= r) coord[k] = x += sign * step;
+  coord[intervals] = end;  // exact end
+  return coord;
+}
 
 Reference finite_cube_reference(const Scene& scene, const std::vector<double>& forces, const ReferenceOptions& options,
                                 const std::function<void(const std::string&)>& progress) {
@@ -226,7 +296,8 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
 }
 
 Reference large_strain_reference(const Scene& scene, const std::vector<double>& depths, const std::vector<int>& levels,
-                                 const std::function<void(const std::string&)>& progress) {
+                                 const std::function<void(const std::string&)>& progress,
+                                 const LargeStrainLattice& lattice) {
   if (levels.size() < 3) throw std::invalid_argument("the reference needs at least three levels");
   if (!at_top_face_centre(scene, indenter_site(scene)))
     throw std::invalid_argument("the large-strain reference is computed at the centre of the top face");
@@ -238,34 +309,55 @@ Reference large_strain_reference(const Scene& scene, const std::vector<double>& 
   ref.key = large_strain_reference_key(scene);
   for (int per_edge : levels) {
     const auto start = std::chrono::steady_clock::now();
-    // The family of graded lattices of finite_cube_reference (a node at the site, one
-    // geometric map refined uniformly), so Richardson applies in the same way.
-    Scene s = level_scene(scene, per_edge, HexFormulation::neo_hookean,
-                          family_first_spacing(scene.box.max[2] - scene.box.min[2], ReferenceOptions{}.base_per_edge,
-                                               0.05 * scene.indenter.radius, per_edge));
-    s.hex_fem.volumetric_integration = HexVolumetricIntegration::full;  // the bricks (5.4) integrate fully
-    const Model model = build_model(s);
-    HeldToolStatics statics(model);
+    const bool quarter = lattice.core_half_width > 0;
+    double first_spacing = 0;
+    Model model;
+    if (quarter) {
+      model = quarter_level_model(scene, per_edge, lattice, first_spacing);
+    } else {
+      // The family of graded lattices of finite_cube_reference (a node at the site, one
+      // geometric map refined uniformly), so Richardson applies in the same way.
+      Scene s = level_scene(scene, per_edge, HexFormulation::neo_hookean,
+                            family_first_spacing(scene.box.max[2] - scene.box.min[2], ReferenceOptions{}.base_per_edge,
+                                                 0.05 * scene.indenter.radius, per_edge));
+      s.hex_fem.volumetric_integration = HexVolumetricIntegration::full;  // the bricks (5.4) integrate fully
+      model = build_model(s);
+      first_spacing = s.distribution.first_spacing;
+    }
+    HeldToolOptions held;
+    if (quarter) held.mirror_axes = {0, 1};
+    const double multiplicity = quarter ? 4.0 : 1.0;  // the whole block's force from the quarter's
+    HeldToolStatics statics(model, held);
     ReferenceLevel level;
     level.per_edge = per_edge;
     level.nodes = model.particle_count;
-    level.first_spacing = s.distribution.first_spacing;
+    level.first_spacing = first_spacing;
     int iterations = 0;
+    std::vector<double> contact_radius;
     for (double d : depths) {
       const HeldToolSolution sol = statics.solve(model.indenter_start - Vec3(0, 0, d));
       if (!sol.converged)
         throw std::runtime_error("large-strain reference level " + std::to_string(per_edge) + ", d = " +
                                  std::to_string(d) + " m: " + sol.message);
-      level.forces.push_back(sol.tool_force[2]);
+      level.forces.push_back(multiplicity * sol.tool_force[2]);
       level.indentation.push_back(d);
       iterations += sol.newton_iterations;
+      // The contact radius: the farthest pressed node from the tool's axis (deformed).
+      double radius = 0;
+      for (int i = 0; i < model.particle_count; ++i)
+        if (statics.contact_pressure()[i] > 0)
+          radius = std::max(radius, (statics.positions().col(i).head<2>() - model.indenter_start.head<2>()).norm());
+      contact_radius.push_back(radius);
     }
     level.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (progress) {
       std::ostringstream o;
-      o << "large-strain reference level " << per_edge << "^3 (" << level.nodes << " nodes, " << iterations
+      o << "large-strain reference level " << per_edge << "^3 (" << (quarter ? "quarter, " : "") << level.nodes
+        << " nodes, spacing at the site " << first_spacing << " m, " << iterations
         << " Newton iterations in all): " << level.seconds << " s; F (N) at the depths:";
       for (double F : level.forces) o << " " << F;
+      o << "; contact radius (m):";
+      for (double a : contact_radius) o << " " << a;
       progress(o.str());
     }
     ref.levels.push_back(std::move(level));

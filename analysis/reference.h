@@ -81,9 +81,31 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
 // force at each depth, as on the indentation in finite_cube_reference. The result has
 // indentation = depths and forces = F*(d); its uncertainty is in depth, the force's
 // converted with the local slope of the extrapolated curve. Key: large_strain_reference_key.
+//
+// With core_half_width w > 0 the family is another (docs/physics.md §5): a quarter of the block
+// (x >= the site's x, y >= the site's y, mirror conditions u_x = 0 and u_y = 0 on the cut
+// planes, the force times 4), whose three axes each run from the site with `core_share` of
+// their intervals uniform over [0, w] (spacing h = w / round(core_share n)) and the rest graded
+// geometrically from h to the box face (core_graded_axis). Level N has N nodes per axis of the
+// quarter (n = N - 1 intervals), so h is proportional to 1 / n and the contact patch, when
+// w exceeds its radius, is sampled uniformly at every level. Requires a homogeneous body with
+// the fixed faces symmetric about the site (x_min with x_max, y_min with y_max), no fixed regions.
+struct LargeStrainLattice {
+  double core_half_width = 0.0;  // m; 0: the graded family of finite_cube_reference on the whole block
+  double core_share = 0.6;       // the share of each axis's intervals inside the core
+};
 Reference large_strain_reference(const Scene& scene, const std::vector<double>& depths,
                                  const std::vector<int>& levels = {17, 21, 25, 29},
-                                 const std::function<void(const std::string&)>& progress = {});
+                                 const std::function<void(const std::string&)>& progress = {},
+                                 const LargeStrainLattice& lattice = {});
+
+// Coordinates of intervals + 1 nodes from `focus` to `end` (either side of it; the first is
+// focus, the last exactly end): core_intervals equal intervals of core_length / core_intervals,
+// then intervals - core_intervals growing geometrically from that spacing (the first of
+// them equal to it) to end. Throws std::invalid_argument when the core does not fit (it is not
+// shorter than |end - focus|, there is no interval outside it, or the outer intervals would
+// have to shrink).
+std::vector<double> core_graded_axis(double focus, double end, int intervals, int core_intervals, double core_length);
 
 
 // Extrapolates d(h) = d* + C h^p from three (h, d) pairs, h decreasing. Returns

@@ -104,6 +104,10 @@ HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lam
   mesh.formulation = formulation;
   // Distinct (element size, lambda, mu) share one stiffness matrix (a regular homogeneous grid has one).
   std::map<std::tuple<long long, long long, long long, uint64_t, uint64_t>, int> type_of_size;
+  // Sizes are keyed in units of 1e-12 of the lattice's extent: one absolute unit, so only
+  // equal bricks share a type (a unit relative to each brick would merge bricks of the same
+  // shape and different sizes, as the cubes along a graded lattice's diagonal).
+  const double unit = 1e-12 * (rest.rowwise().maxCoeff() - rest.rowwise().minCoeff()).maxCoeff();
   auto node = [&](int a, int b, int c) { return a + nx * (b + ny * c); };
   for (int c = 0; c + 1 < nz; ++c)
     for (int b = 0; b + 1 < ny; ++b)
@@ -113,8 +117,6 @@ HexMesh hex_mesh(const Points& rest, const Eigen::Vector3i& per_axis, double lam
                                           node(a + 1, b + 1, c + 1), node(a, b + 1, c + 1)};
         const Vec3 size(rest(0, nodes[1]) - rest(0, nodes[0]), rest(1, nodes[3]) - rest(1, nodes[0]),
                         rest(2, nodes[4]) - rest(2, nodes[0]));
-        // Key on the size rounded to 1e-12 of the largest edge so equal bricks share K_e.
-        const double unit = 1e-12 * size.maxCoeff();
         double element_lambda = lambda, element_mu = mu;
         if (heterogeneous) {
           const CellMaterial c = cell_material(*heterogeneous, rest.col(nodes[0]), rest.col(nodes[6]));

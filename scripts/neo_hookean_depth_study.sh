@@ -3,9 +3,10 @@
 # "Large depth: the neo-Hookean MLS against the neo-Hookean hex FEM"): scenes/palpation_block_neo.json
 # (the hand-scale block, material.law neo_hookean, a cloud refined to 1 mm over the whole
 # contact patch of d = R) pressed with the forces that the large-strain reference
-# (palpate-reference --depths: neo-Hookean bricks on graded lattices, the tool held at each
-# depth, Richardson on the force; stored in scenes/references/) spans at the depths
-# d/R = 0.22 ... 1.
+# (palpate-reference --depths --core-half-width: neo-Hookean bricks on a quarter of the block
+# with mirror planes, lattices uniform over the contact patch and graded beyond, the tool
+# held at each depth, Richardson on the force; stored in scenes/references/) spans at the
+# depths d/R = 0.22 ... 1.
 # Also the small-depth check: the same scene at its default sweep (d/R = 0.065 ... 0.2)
 # against the linear finite-block reference with the neo-Hookean and corotational laws,
 # and at d/R = 0.015 ... 0.065 the three laws (linear, corotational, neo-Hookean) on the
@@ -14,8 +15,8 @@
 # (palpate-verify --json) and DIR/neo_hookean_depth.md (the tables).
 #
 # usage: scripts/neo_hookean_depth_study.sh [--reference] [--out DIR]
-#   --reference   recompute the large-strain reference (levels 13,15,17: about 15 min on a
-#                 quiet machine, 28 min at load 7; the stored one is used otherwise)
+#   --reference   recompute the large-strain reference (quarter levels 11,16,21,26 with a
+#                 12 mm core: about 10 min on one core; the stored one is used otherwise)
 # The verify runs take about 15 min more (the refined cloud at d = R: ~600 particles in
 # contact).
 #   --out DIR     output folder (default docs/verification/neo_hookean_depth)
@@ -44,11 +45,13 @@ mkdir -p "$out"
 scene=scenes/palpation_block_neo.json
 ref=scenes/references/palpation_block_large_strain.json
 
-# Levels 13, 15, 17 only: 19 and 21 take most of an hour each on a loaded machine, and on
-# the 21-per-edge lattice Newton stalled at d = 1 mm (docs/verification.md).
+# The quarter block, each axis uniform over 12 mm from the site (1.2-1.5 times the contact
+# radius of d = R) with 60 % of its intervals, spacing 2, 1.33, 1, 0.8 mm at the levels
+# 11, 16, 21, 26 nodes per axis (docs/verification.md, "Large depth").
 if [[ $recompute == 1 || ! -f "$ref" ]]; then
-  echo "neo_hookean_depth_study.sh: palpate-reference --depths (tens of minutes)" >&2
-  "$reference" --scene "$scene" --depths 0.0022,0.003,0.005,0.0075,0.01 --levels 13,15,17 --out "$ref"
+  echo "neo_hookean_depth_study.sh: palpate-reference --depths (about 10 min)" >&2
+  "$reference" --scene "$scene" --depths 0.0022,0.003,0.005,0.0075,0.01 --levels 11,16,21,26 \
+    --core-half-width 0.012 --out "$ref"
 fi
 
 # Forces inside the reference's range F*(2.2 mm) ... F*(10 mm); palpate-verify takes d_ref
@@ -76,7 +79,8 @@ def load(name):
     return json.load(open(f"{out}/{name}.json"))
 lines = ["# The neo-Hookean MLS at large depth (scripts/neo_hookean_depth_study.sh)", ""]
 lines += ["## Large depth, against the large-strain reference", "",
-          "levels: " + ", ".join(f"{l['per_edge']}^3 ({l['nodes']} nodes, {l['seconds']:.0f} s)" for l in ref["levels"]), "",
+          "levels: " + ", ".join(f"{l['per_edge']}^3 ({l['nodes']} nodes, spacing {1000 * l['first_spacing']:.2f} mm, "
+                                 f"{l['seconds']:.0f} s)" for l in ref["levels"]), "",
           "| d (m) | d/R | " + " | ".join(f"F {l['per_edge']}^3 (N)" for l in ref["levels"]) +
           " | F* (N) | p | ± d (m) |",
           "|---:|---:|" + "---:|" * len(ref["levels"]) + "---:|---:|---:|"]

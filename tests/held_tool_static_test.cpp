@@ -16,6 +16,7 @@
 #include "analysis/held_tool_static.h"
 #include "analysis/reference.h"
 #include "analysis/static_contact.h"
+#include "core/hex_fem.h"
 #include "core/solid.h"
 #include "core/state.h"
 #include "test_util.h"
@@ -129,6 +130,89 @@ TEST(HeldToolStatics, LargeDepthNeoHookeanIsInEquilibriumAndSignorini) {
   // fixed nodes) balance the contact forces, that is they equal the force on the tool.
   EXPECT_NEAR((-support - sol.tool_force).norm(), 0.0, 1e-5 * sol.tool_force[2])
       << "supports " << support.transpose() << " tool " << sol.tool_force.transpose();
+}
+
+// A box block of neo-Hookean bricks on a plain lattice of `spacing`, the sphere (R = 1 cm)
+// over (x, y) = (0, 0): the whole block, or its quarter x, y >= 0 whose cut planes are left free
+// (the solver's mirrors hold them).
+std::string mirror_block(bool quarter) {
+  const std::string lo = quarter ? "[0, 0, -0.02]" : "[-0.02, -0.02, -0.02]";
+  const std::string fixed = quarter ? R"(["bottom", "x_max", "y_max"])" : R"(["bottom", "sides"])";
+  return R"({"model": "hex_fem", "hex_fem": {"formulation": "neo_hookean"},
+             "body": {"box": {"min": )" + lo + R"(, "max": [0.02, 0.02, 0]},
+                      "distribution": {"type": "grid", "spacing": 0.0025}},
+             "material": {"young_modulus": 2e4, "poisson_ratio": 0.3},
+             "fixed": )" + fixed + R"(,
+             "indenter": {"radius": 0.01, "position": [0, 0, 0.01]},
+             "integrator": {"allow_unstable_dt": true}})";
+}
+
+TEST(HeldToolStatics, AQuarterWithMirrorPlanesCarriesAQuarterOfTheForce) {
+  // The block and the sphere are symmetric about x = 0 and y = 0: the quarter with u_x = 0
+  // on x = 0 and u_y = 0 on y = 0 is the same problem, a quarter of the nodes, at d = 0.5 R
+  // (several rings of nodes in contact, nodes on both mirrors pressed).
+  const Model full = test::model_from_json(mirror_block(false));
+  const Model quarter = test::model_from_json(mirror_block(true));
+  ASSERT_EQ(full.particle_count, 17 * 17 * 9);
+  ASSERT_EQ(quarter.particle_count, 9 * 9 * 9);
+  HeldToolOptions mirrors;
+  mirrors.mirror_axes = {0, 1};
+  HeldToolStatics whole(full), part(quarter, mirrors);
+  const double d = 0.005;
+  const HeldToolSolution a = whole.solve(full.indenter_start - Vec3(0, 0, d));
+  const HeldToolSolution b = part.solve(quarter.indenter_start - Vec3(0, 0, d));
+  ASSERT_TRUE(a.converged) << a.message;
+  ASSERT_TRUE(b.converged) << b.message;
+  EXPECT_GT(b.active_count, 3);
+  EXPECT_NEAR(4 * b.tool_force[2], a.tool_force[2], 1e-6 * a.tool_force[2]);
+  // The nodes on the mirrors kept their mirror component.
+  for (int i = 0; i < quarter.particle_count; ++i)
+    for (int c = 0; c < 2; ++c)
+      if (quarter.rest_position(c, i) == 0.0) {
+        EXPECT_EQ(part.positions()(c, i), 0.0) << "node " << i;
+      }
+  HeldToolOptions wrong;
+  wrong.mirror_axes = {2};
+  EXPECT_THROW(HeldToolStatics(quarter, wrong), std::invalid_argument);
+}
+
+TEST(HexMesh, BricksOfOneShapeAndTwoSizesAreTwoTypes) {
+  // Axes {0, 1, 3}: bricks of edges 1 and 2 in every combination, the cubes 1^3 and 2^3 among
+  // them; each element's type must carry its own size (a shape-only key merged the cubes).
+  const std::vector<double> axis{0.0, 0.01, 0.03};
+  Points X(3, 27);
+  int i = 0;
+  for (int c = 0; c < 3; ++c)
+    for (int b = 0; b < 3; ++b)
+      for (int a = 0; a < 3; ++a) X.col(i++) = Vec3(axis[a], axis[b], axis[c]);
+  const HexMesh mesh = hex_mesh(X, Eigen::Vector3i::Constant(3), 1e4, 1e4, HexFormulation::neo_hookean);
+  EXPECT_EQ(mesh.element_size.size(), 8u);
+  for (int e = 0; e < mesh.element_count; ++e) {
+    const auto& n = mesh.element_nodes[e];
+    const Vec3 size(X(0, n[1]) - X(0, n[0]), X(1, n[3]) - X(1, n[0]), X(2, n[4]) - X(2, n[0]));
+    EXPECT_LT((mesh.element_size[mesh.element_type[e]] - size).norm(), 1e-15) << "element " << e;
+  }
+}
+
+TEST(LargeStrainReference, CoreGradedAxis) {
+  // 20 intervals from 0 to 0.05 m, 12 of them uniform over the core of 0.012 m.
+  const std::vector<double> up = core_graded_axis(0.0, 0.05, 20, 12, 0.012);
+  ASSERT_EQ(up.size(), 21u);
+  EXPECT_EQ(up.front(), 0.0);
+  EXPECT_EQ(up.back(), 0.05);
+  for (int k = 1; k <= 12; ++k) EXPECT_NEAR(up[k] - up[k - 1], 0.001, 1e-15) << k;
+  EXPECT_NEAR(up[13] - up[12], 0.001, 1e-15) << "the first outer interval continues the core's";
+  for (int k = 14; k <= 20; ++k) EXPECT_GT(up[k] - up[k - 1], up[k - 1] - up[k - 2]) << "geometric growth at " << k;
+  // Toward a lower end (the depth axis from the top face): the mirror image.
+  const std::vector<double> down = core_graded_axis(0.0, -0.05, 20, 12, 0.012);
+  EXPECT_EQ(down.back(), -0.05);
+  for (size_t k = 0; k < up.size(); ++k) EXPECT_NEAR(down[k], -up[k], 1e-15);
+  // A core that does not fit: as long as the side, no interval outside it, or outer
+  // intervals that would have to shrink below the core's spacing.
+  EXPECT_THROW(core_graded_axis(0.0, 0.05, 20, 12, 0.05), std::invalid_argument);
+  EXPECT_THROW(core_graded_axis(0.0, 0.05, 20, 20, 0.012), std::invalid_argument);
+  EXPECT_THROW(core_graded_axis(0.0, 0.05, 20, 0, 0.012), std::invalid_argument);
+  EXPECT_THROW(core_graded_axis(0.0, 0.05, 60, 12, 0.012), std::invalid_argument);
 }
 
 TEST(LargeStrainReference, AtSmallDepthItIsTheLinearBlock) {

@@ -14,6 +14,8 @@
 #include "analysis/reference.h"
 #include "core/scene.h"
 
+#include <spdlog/spdlog.h>
+
 using namespace palpate;
 
 namespace {
@@ -33,10 +35,17 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
                         (--levels; default 17,21,25,29), the tool held at each depth
                         (m, increasing) below first touch at the centre, Richardson on the
                         force; for palpate-verify --reference FILE on neo-Hookean scenes
+  --core-half-width W   with --depths: the quarter-block family instead (docs/physics.md §5):
+                        a quarter of the block with mirror planes through the site, each
+                        axis uniform over W (m) from the site with --core-share of its
+                        intervals (default 0.6), geometric beyond; --levels are the
+                        quarter's nodes per axis (choose W above the largest contact radius)
+  --core-share S        the share of each axis's intervals inside the core (0 < S < 1)
   --set KEY=VALUE       override a scene field (repeatable)
   --out FILE            write the reference as JSON (what palpate-verify --reference reads)
   --json                print the reference as JSON on stdout
   --quiet               no progress on stderr
+  --log-level LEVEL     spdlog level (default: warn; debug: the held solve's Newton steps)
 )";
 
 }  // namespace
@@ -46,8 +55,10 @@ int main(int argc, char** argv) {
   SceneOverrides overrides;
   std::vector<double> forces, depths;
   ReferenceOptions options;
+  LargeStrainLattice lattice;
   bool levels_given = false;
   bool json = false, quiet = false;
+  std::string log_level = "warn";
   std::vector<double> site;
   try {
     for (cli::Arguments args(argc, argv); args.next();) {
@@ -59,6 +70,12 @@ int main(int argc, char** argv) {
       else if (arg == "--first-spacing") options.base_first_spacing = cli::positive_list(value(), "--first-spacing").at(0);
       else if (arg == "--set") overrides.push_back(cli::scene_override(value()));
       else if (arg == "--depths") depths = cli::positive_list(value(), "--depths");
+      else if (arg == "--core-half-width")
+        lattice.core_half_width = cli::positive_list(value(), "--core-half-width").at(0);
+      else if (arg == "--core-share") {
+        lattice.core_share = cli::positive_list(value(), "--core-share").at(0);
+        if (!(lattice.core_share < 1)) throw std::invalid_argument("--core-share: a share below 1");
+      }
       else if (arg == "--out") out_file = value();
       else if (arg == "--site") {
         site = cli::number_list(value(), "--site");
@@ -66,12 +83,17 @@ int main(int argc, char** argv) {
       }
       else if (arg == "--json") json = true;
       else if (arg == "--quiet") quiet = true;
+      else if (arg == "--log-level") log_level = value();
       else if (arg == "--help" || arg == "-h") {
         std::cout << kUsage;
         return 0;
       } else throw std::invalid_argument("unknown option " + arg);
     }
     if (scene_file.empty()) throw std::invalid_argument("--scene FILE is required");
+    if (!depths.empty() && options.base_first_spacing > 0)
+      throw std::invalid_argument("--first-spacing: not used with --depths (see --core-half-width)");
+    if (depths.empty() && lattice.core_half_width > 0)
+      throw std::invalid_argument("--core-half-width: only with --depths");
     if (options.levels.size() < 3) throw std::invalid_argument("--levels: at least three levels");
     for (size_t k = 1; k < options.levels.size(); ++k)
       if (options.levels[k] <= options.levels[k - 1]) throw std::invalid_argument("--levels must increase");
@@ -80,6 +102,7 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  spdlog::set_level(spdlog::level::from_str(log_level));
   Reference ref;
   try {
     Scene scene = load_scene(scene_file, overrides);
@@ -97,7 +120,7 @@ int main(int argc, char** argv) {
     };
     if (!depths.empty())
       ref = large_strain_reference(scene, depths, levels_given ? options.levels : std::vector<int>{17, 21, 25, 29},
-                                   progress);
+                                   progress, lattice);
     else
       ref = finite_cube_reference(scene, forces, options, progress);
     if (!out_file.empty()) {
