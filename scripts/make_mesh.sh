@@ -27,6 +27,9 @@
 #     --refine X Y Z R H  also at most H inside the ball of radius R about (X, Y, Z), growing
 #                       by G away from it: H + (G - 1) x (distance - R) (an inclusion;
 #                       repeatable)
+#     --focus-line X0 Y0 X1 Y1 H  also at most H on the segment (X0, Y0)-(X1, Y1) of the
+#                       top face (a scan path), growing by G away from it: H + (G - 1) x
+#                       (distance to the segment) (repeatable; not with --dome)
 #     --dome RB         the body is a hemisphere of radius RB on the plane z = 0 (its
 #                       centre at the origin, its pole at (0, 0, RB)) instead of the box, with
 #                       the physical groups "base" (the flat face, to fix), "skin" (the curved
@@ -59,6 +62,7 @@ patch=
 seed=1
 format=msh41
 refines=()
+lines=()
 dome=
 
 die() { echo "make_mesh.sh: $*" >&2; exit 2; }
@@ -85,6 +89,10 @@ while [ $# -gt 0 ]; do
               for v in "${@:2:5}"; do number --refine "$v"; done
               awk -v r="$5" -v h="$6" 'BEGIN { exit !(r > 0 && h > 0) }' || die "--refine: R and H must be positive"
               refines+=("${*:2:5}"); shift 6 ;;
+    --focus-line) [ $# -ge 6 ] || die "--focus-line needs 5 numbers (X0 Y0 X1 Y1 H)"
+                  for v in "${@:2:5}"; do number --focus-line "$v"; done
+                  awk -v h="$6" 'BEGIN { exit !(h > 0) }' || die "--focus-line: H must be positive"
+                  lines+=("${*:2:5}"); shift 6 ;;
     --dome) number "$1" "${2:-}"; dome=$2; shift 2 ;;
     --scene) scene=${2:?--scene needs a file}
              tool=${PALPATE_BIN:-build/bin}/palpate-resolution
@@ -98,7 +106,7 @@ while [ $# -gt 0 ]; do
              for ((k = 0; k < refine_count; ++k)) { v=refine_$k; refines+=("${!v}"); }
              echo "make_mesh.sh: $scene asks for $h0 m under the tool at (${focus[*]}), ${refine_count} inclusion(s)" >&2
              shift 2 ;;
-    -h|--help) sed -n '2,48p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,50p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (--help)" ;;
   esac
 done
@@ -111,6 +119,7 @@ awk -v a="${box[0]}" -v b="${box[1]}" -v c="${box[2]}" -v d="${box[3]}" -v e="${
 if [ -n "$dome" ]; then
   awk -v r="$dome" 'BEGIN { exit !(r > 0) }' || die "--dome: the radius must be positive"
   [ -z "$patch" ] || die "--patch goes with the box, not --dome"
+  [ ${#lines[@]} -eq 0 ] || die "--focus-line goes with the box, not --dome"
   box=(-$dome -$dome 0 $dome $dome $dome)
   [ ${#focus[@]} -gt 0 ] || [ $focus_top -eq 1 ] || focus=(0 0 $dome)
 fi
@@ -157,6 +166,20 @@ for r in "${refines[@]}"; do
   read -r rx ry rz rr rh <<< "$r"
   size="Min($size, $rh + ($growth - 1) * Max(Sqrt((x - ($rx))^2 + (y - ($ry))^2 + (z - ($rz))^2) - $rr, 0))"
   where="$where, at most $rh m within $rr m of ($rx, $ry, $rz)"
+done
+
+for l in "${lines[@]}"; do
+  read -r ax ay bx by lh <<< "$l"
+  # t: the parameter of the point of the segment nearest to (x, y), clamped to [0, 1].
+  ll=$(awk -v a="$ax" -v b="$ay" -v c="$bx" -v d="$by" 'BEGIN { printf "%.17g", (c - a)^2 + (d - b)^2 }')
+  if awk -v l="$ll" 'BEGIN { exit !(l > 0) }'; then
+    t="Min(Max(((x - ($ax)) * (($bx) - ($ax)) + (y - ($ay)) * (($by) - ($ay))) / $ll, 0), 1)"
+  else
+    t="0"
+  fi
+  segment="Sqrt((x - ($ax) - $t * (($bx) - ($ax)))^2 + (y - ($ay) - $t * (($by) - ($ay)))^2 + ((${box[5]}) - z)^2)"
+  size="Min($size, $lh + ($growth - 1) * $segment)"
+  where="$where, at most $lh m along ($ax, $ay)-($bx, $by) on the top face"
 done
 
 work=$(mktemp -d)
