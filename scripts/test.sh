@@ -14,7 +14,11 @@ if [ "${1:-}" != "--sanitize" ]; then
   export BUILD_DIR=${BUILD_DIR:-build}
   scripts/build.sh
   cd "$BUILD_DIR"
-  ctest --output-on-failure -j"$(nproc)" "$@"
+  # As in the sanitized runs below: the e2e tests run real-time sessions against the wall
+  # clock on a shared machine (one late tick fails the command-latency test), so a test that
+  # fails is run once more and the suite fails only if it fails twice; the log shows every
+  # failure. A deterministic test that fails fails twice.
+  ctest --output-on-failure -j"$(nproc)" --repeat until-pass:2 "$@"
   exit
 fi
 
