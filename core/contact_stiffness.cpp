@@ -255,6 +255,7 @@ void ContactStiffness::apply_operator(const Model& model, int count, const Point
 }
 
 void ContactStiffness::precondition(int count, const Points* const* r, Points* const* z) {
+  if (count == 0) return;  // every direction stopped: no pass over the particles for nothing
   // (2.21): block Jacobi, restricted to the tangent plane at the active particles ...
   for (int q = 0; q < count; ++q) {
     const Points& rq = *r[q];
