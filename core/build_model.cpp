@@ -103,6 +103,35 @@ void build_force_blocks(Model& m) {
       }
     }
   }
+  if (m.hourglass_weight.empty()) {
+    m.block_hourglass_slots.clear();
+    m.block_hourglass.clear();
+    return;
+  }
+  // Hourglass control's blocked terms (docs/physics.md (1.9a)); zero in padding slots and lanes.
+  m.block_hourglass_slots.assign(m.block_slots.size(), Model::HourglassSlot{});
+  m.block_hourglass.assign(block_count, Model::HourglassBlock{});
+  for (int b = 0; b < block_count; ++b) {
+    const Model::ParticleBlock& block = m.blocks[b];
+    Model::HourglassBlock& hg = m.block_hourglass[b];
+    for (int l = 0; l < W && W * b + l < n; ++l) {
+      const int i = W * b + l;
+      Mat3 H = Mat3::Zero();
+      Vec3 e_sum = Vec3::Zero();
+      for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+        const double k = m.hourglass_weight[a];
+        const Vec3 X_ij = m.neighbor_rest_offset.col(a);
+        H += k * X_ij * X_ij.transpose();
+        e_sum += k * X_ij;
+        Model::HourglassSlot& slot = m.block_hourglass_slots[block.slot_begin + (a - m.neighbor_offset[i])];
+        slot.k[l] = k;
+        for (int c = 0; c < 3; ++c) slot.e[c][l] = k * X_ij[c];
+      }
+      const int entry[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
+      for (int q = 0; q < 6; ++q) hg.H[q][l] = H(entry[q][0], entry[q][1]);
+      for (int c = 0; c < 3; ++c) hg.e_sum[c][l] = e_sum[c];
+    }
+  }
 }
 
 // Material (Lame parameters from E, nu).
@@ -288,8 +317,6 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
   } else {
     m.integration_residual_nodal = m.integration_residual = integration_residual(m, interior);
   }
-  build_force_blocks(m);
-
   // Hourglass control: kappa_i = c * 2 mu * v_i / tr(A_i), per neighbour kappa_i w_ij.
   if (scene.mls.hourglass > 0) {
     m.hourglass_weight.resize(nnz);
@@ -302,6 +329,7 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
       }
     }
   }
+  build_force_blocks(m);
 
 }
 

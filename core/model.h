@@ -67,6 +67,19 @@ struct Model {
   // Hourglass control (empty when the scene's mls.hourglass == 0).
   std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
   Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)
+  // Its blocked copy (docs/physics.md (1.9a)), parallel to block_slots and blocks; padding
+  // slots and lanes hold zeros. Per slot k_ij = kappa_i w_ij and e_ij = k_ij X_ij; per
+  // particle H_i = sum_j k_ij X_ij X_ij^T and e_i = sum_j e_ij.
+  struct HourglassSlot {
+    alignas(32) double e[3][block_width];  // e_ij, N: component c of lane l at e[c][l]
+    double k[block_width];                 // k_ij, N/m
+  };
+  struct HourglassBlock {
+    alignas(32) double H[6][block_width];  // H_i entries (0,0), (1,1), (2,2), (0,1), (0,2), (1,2), N m
+    double e_sum[3][block_width];          // e_i, N
+  };
+  std::vector<HourglassSlot> block_hourglass_slots;  // as block_slots (hourglass only)
+  std::vector<HourglassBlock> block_hourglass;       // as blocks (hourglass only)
 
   // The undeformed boundary surface (core/surface.h): 3 x T particle indices, each triangle
   // counterclockwise seen from outside. Mesh clouds: the mesh's boundary faces; lattices

@@ -273,9 +273,12 @@ TEST(HeterogeneousMls, ForcesAndTangentAreConsistentForEveryLawAndPath) {
     SCOPED_TRACE(law + " hourglass");
     const Model hourglass =
         test::model_from_json(cube_scene(R"(, "law": ")" + law + "\"" + kStiffBall, R"(, "hourglass": 0.5)"));
-    ASSERT_FALSE(detail::uses_blocked_loops(hourglass));
+    ASSERT_TRUE(detail::uses_blocked_loops(hourglass));  // per-particle kappa_i of the ball in the blocked terms
     expect_forces_are_energy_gradient(hourglass, 0.03);
     expect_tangent_matches_finite_differences(hourglass, 0.03);
+    Model per_particle = hourglass;
+    per_particle.blocks.clear();
+    expect_forces_are_energy_gradient(per_particle, 0.03);
   }
 }
 

@@ -229,7 +229,7 @@ void expect_tangent_matches_finite_differences(const Model& m, double strain_sca
 TEST(MlsSolid, ForceDifferentialMatchesFiniteDifferences) {
   expect_tangent_matches_finite_differences(
       test::model_from_json(cloud_scene(kJittered, R"(, "hourglass": 0.2)", R"(, "volume_stiffness": 700)")), 0.04);
-  // Without hourglass control the vectorised loop takes it, volume term included.
+  // Without hourglass control, volume term included.
   expect_tangent_matches_finite_differences(
       test::model_from_json(cloud_scene(kJittered, "", R"(, "volume_stiffness": 700)")), 0.04);
 }
@@ -628,14 +628,14 @@ TEST(NeoHookean, ForcesAreNegativeEnergyGradient) {
   expect_forces_are_energy_gradient(
       test::model_from_json(cloud_scene(kJittered, "", kNeoHookean + R"(, "volume_stiffness": 700)")), 0.05);
   expect_forces_are_energy_gradient(test::model_from_json(cloud_scene(kJittered, R"(, "hourglass": 0.3)", kNeoHookean)),
-                                    0.05);  // the per-particle loop
+                                    0.05);  // with hourglass control's blocked terms
   const Model m = test::model_from_json(cloud_scene(kJittered, "", kNeoHookean));
   expect_no_net_force_or_torque(m, m.rest_position + random_displacement(m, 0.05, 11));
 }
 
 TEST(NeoHookean, ForceDifferentialMatchesFiniteDifferences) {
   // At strains of 8 % of the spacing per component (ln J far from 0) on the blocked loop,
-  // with the volume term, and on the per-particle loop (hourglass control on).
+  // with the volume term, and with hourglass control.
   expect_tangent_matches_finite_differences(test::model_from_json(cloud_scene(kJittered, "", kNeoHookean)), 0.08);
   expect_tangent_matches_finite_differences(
       test::model_from_json(cloud_scene(kJittered, "", kNeoHookean + R"(, "volume_stiffness": 700)")), 0.08);
@@ -728,7 +728,8 @@ TEST(NeoHookean, SteppingAnInvertedBodyIsAnInversionFaultNotANonFiniteState) {
 }
 
 // The vectorised loops over Model::blocks (four particles per block) against the
-// per-particle loops, for every law with and without the volume term (A-12), on clouds
+// per-particle loops, for every law with and without the volume term (A-12) and hourglass
+// control (1.9, blocked as (1.9a)), on clouds
 // whose particle count is not a multiple of four: the last block then has padding lanes
 // (zero volume and weights, neighbour slots naming particle 0, the lane's particle
 // repeating n - 1), and any of them leaking into a real particle's force or differential
@@ -748,46 +749,47 @@ TEST(MlsSolid, BlockedLoopsMatchThePerParticleLoopsWithPaddingLanes) {
   const Mat3 stretch = Vec3(1.35, 0.7, 1.1).asDiagonal();
   for (const Cloud& cloud : clouds)
     for (const std::string law : {"stvk", "corotational", "linear", "neo_hookean"})
-      for (const std::string k_v : {"0", "700"}) {
-        SCOPED_TRACE(cloud.distribution + ", law " + law + ", k_v " + k_v);
-        const std::string material = R"(, "law": ")" + law + R"(", "volume_stiffness": )" + k_v;
-        const Model m = test::model_from_json(cloud_scene(cloud.distribution, "", material));
-        const int n = m.particle_count;
-        ASSERT_EQ(n, cloud.per_edge * cloud.per_edge * cloud.per_edge);
-        ASSERT_NE(n % Model::block_width, 0) << "the last block must have padding lanes";
-        Model reference = m;
-        reference.blocks.clear();
-        ASSERT_TRUE(detail::uses_blocked_loops(m));
-        ASSERT_FALSE(detail::uses_blocked_loops(reference));
-        // A rotated stretch of the rest positions plus a random perturbation of up to 15 %
-        // of the spacing per component.
-        const double spacing = 1.0 / (cloud.per_edge - 1);
-        const Points noise = random_displacement(m, 0.15 * spacing, 21);
-        Points x(3, n);
-        for (int i = 0; i < n; ++i) x.col(i) = Q * stretch * m.rest_position.col(i) + noise.col(i);
-        // (a) The forces (A-10, A-11).
-        Points f(3, n), f_reference(3, n);
-        mls_internal_forces(m, x, f);
-        mls_internal_forces(reference, x, f_reference);
-        const double force_difference = (f - f_reference).cwiseAbs().maxCoeff() / f_reference.cwiseAbs().maxCoeff();
-        EXPECT_LT(force_difference, 1e-12);
-        // (b) The force differential df = (df/dx) dx at x (the linearisation is shared).
-        std::vector<double> F, S;
-        mls_linearize(m, x, F, S);
-        const Points dx = random_displacement(m, spacing, 33);
-        Points df(3, n), df_reference(3, n);
-        mls_force_differential(m, F, S, dx, df);
-        mls_force_differential(reference, F, S, dx, df_reference);
-        const double differential_difference =
-            (df - df_reference).cwiseAbs().maxCoeff() / df_reference.cwiseAbs().maxCoeff();
-        EXPECT_LT(differential_difference, 1e-12);
-      }
+      for (const std::string k_v : {"0", "700"})
+        for (const std::string hourglass : {"", R"(, "hourglass": 0.2)"}) {
+          SCOPED_TRACE(cloud.distribution + ", law " + law + ", k_v " + k_v + hourglass);
+          const std::string material = R"(, "law": ")" + law + R"(", "volume_stiffness": )" + k_v;
+          const Model m = test::model_from_json(cloud_scene(cloud.distribution, hourglass, material));
+          const int n = m.particle_count;
+          ASSERT_EQ(n, cloud.per_edge * cloud.per_edge * cloud.per_edge);
+          ASSERT_NE(n % Model::block_width, 0) << "the last block must have padding lanes";
+          Model reference = m;
+          reference.blocks.clear();
+          ASSERT_TRUE(detail::uses_blocked_loops(m));
+          ASSERT_FALSE(detail::uses_blocked_loops(reference));
+          // A rotated stretch of the rest positions plus a random perturbation of up to 15 %
+          // of the spacing per component.
+          const double spacing = 1.0 / (cloud.per_edge - 1);
+          const Points noise = random_displacement(m, 0.15 * spacing, 21);
+          Points x(3, n);
+          for (int i = 0; i < n; ++i) x.col(i) = Q * stretch * m.rest_position.col(i) + noise.col(i);
+          // (a) The forces (A-10, A-11).
+          Points f(3, n), f_reference(3, n);
+          mls_internal_forces(m, x, f);
+          mls_internal_forces(reference, x, f_reference);
+          const double force_difference = (f - f_reference).cwiseAbs().maxCoeff() / f_reference.cwiseAbs().maxCoeff();
+          EXPECT_LT(force_difference, 1e-12);
+          // (b) The force differential df = (df/dx) dx at x (the linearisation is shared).
+          std::vector<double> F, S;
+          mls_linearize(m, x, F, S);
+          const Points dx = random_displacement(m, spacing, 33);
+          Points df(3, n), df_reference(3, n);
+          mls_force_differential(m, F, S, dx, df);
+          mls_force_differential(reference, F, S, dx, df_reference);
+          const double differential_difference =
+              (df - df_reference).cwiseAbs().maxCoeff() / df_reference.cwiseAbs().maxCoeff();
+          EXPECT_LT(differential_difference, 1e-12);
+        }
 }
 
 // The multi-direction tangent product (elastic_force_differentials, one sweep over the pairs
 // for the MLS solid) equals the single products direction by direction, to round-off, for
-// 1, 2 and 3 directions: every law with and without the volume term on the blocked loops
-// (padding lanes), the per-particle loop (hourglass control), and the hex FEM's formulations.
+// 1, 2 and 3 directions: every law with and without the volume term and hourglass control
+// on the blocked loops (padding lanes), and the hex FEM's formulations.
 void expect_differentials_equal_single_products(const Model& m, const Points& x, double scale) {
   Workspace w;
   linearize_elastic(m, x, w);
@@ -822,7 +824,7 @@ TEST(MlsSolid, MultiDirectionTangentEqualsSingleProducts) {
         SCOPED_TRACE("law " + law + ", k_v " + k_v + (hourglass.empty() ? "" : ", hourglass"));
         const Model m =
             test::model_from_json(cloud_scene(cloud, hourglass, R"(, "law": ")" + law + R"(", "volume_stiffness": )" + k_v));
-        ASSERT_EQ(detail::uses_blocked_loops(m), hourglass.empty());
+        ASSERT_TRUE(detail::uses_blocked_loops(m));
         ASSERT_NE(m.particle_count % Model::block_width, 0) << "the last block must have padding lanes";
         const double spacing = 1.0 / 6;
         const Points noise = random_displacement(m, 0.15 * spacing, 21);
