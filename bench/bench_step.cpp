@@ -160,7 +160,9 @@ int main(int argc, char** argv) {
     std::vector<double> ms;
   };
   enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_first, ie_free, health,
-         op_count };
+         pair_floor, op_count };
+  // The blocked force loop's memory work alone (detail::pair_loop_floor), one thread.
+  const bool floor_timed = is_mls && detail::uses_blocked_loops(model);
   // Everything timed at one thread count: its own State (and pool), force buffers, options.
   struct Variant {
     int threads;
@@ -196,6 +198,8 @@ int main(int argc, char** argv) {
     // The force evaluation is timed warm (after an untimed one), as in the stages of a step.
     auto evaluate_forces = [&model, &start_position, &w] { elastic_forces(model, start_position, w.f, w.force_threads); };
     ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
+    auto pair_loop_alone = [&model, &start_position, &w] { (void)detail::pair_loop_floor(model, start_position, w.f); };
+    ops[pair_floor] = {pair_loop_alone, pair_loop_alone, floor_timed && c == 1 ? repeats : 0, {}};
     // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
     auto apply_tangent = [&model, &start, &w] { elastic_force_differential(model, w.linearized, start.saved().velocity, w.df); };
     ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
@@ -278,6 +282,13 @@ int main(int argc, char** argv) {
                           {"candidates", o.contact_candidate.size()}};
   };
 
+  // The floor under the force evaluation: its gathers, F and scatters with P = F; the law's loop
+  // at that time would reach `ceiling` of the double peak.
+  double floor_ms = NAN, floor_ceiling = NAN;
+  if (floor_timed) {
+    floor_ms = med(pair_floor);
+    if (peak.double_gflops > 0) floor_ceiling = flops / (floor_ms * 1e6) / peak.double_gflops;
+  }
   const double gflops = flops / (force_eval_ms * 1e6);
   const double fraction_of_peak = peak.double_gflops > 0 ? gflops / peak.double_gflops : NAN;
   const double ns_per_pair = nnz > 0 ? force_eval_ms * 1e6 / nnz : NAN;
@@ -299,6 +310,10 @@ int main(int argc, char** argv) {
   j["force_eval_ns_per_pair"] = nnz > 0 ? nlohmann::json(ns_per_pair) : nlohmann::json(nullptr);
   j["peak_double_gflops"] = peak.double_gflops;
   j["peak_single_gflops"] = peak.single_gflops;
+  j["pair_loop_floor_ms"] = floor_timed ? nlohmann::json(floor_ms) : nlohmann::json(nullptr);
+  j["pair_loop_floor_ns_per_pair"] = floor_timed && nnz > 0 ? nlohmann::json(floor_ms * 1e6 / nnz) : nlohmann::json(nullptr);
+  j["force_eval_ceiling_fraction_of_peak"] =
+      floor_timed && peak.double_gflops > 0 ? nlohmann::json(floor_ceiling) : nlohmann::json(nullptr);
   j["force_differential_ms"] = tangent_ms;
   j["rk4_step_ms"] = rk4_ms;
   j["rk4_step_contacts"] = rk4_contacts;
@@ -370,6 +385,11 @@ int main(int argc, char** argv) {
                   100 * fraction_of_peak, ns_per_pair);
     else
       std::printf("  %-34s %10.4f ms\n", "mls_internal_forces", force_eval_ms);
+    if (floor_timed)
+      std::printf("  %-34s %10.4f ms   %.2f ns per pair (%.0f %% of the force evaluation): at this time the\n"
+                  "  %-34s %10s      force evaluation's flops would reach %.0f %% of the double peak\n",
+                  "  its pair loop alone (P = F)", floor_ms, floor_ms * 1e6 / nnz, 100 * floor_ms / force_eval_ms, "",
+                  "", 100 * floor_ceiling);
     std::printf("  %-34s %10.4f ms\n", "mls_force_differential (K dx)", tangent_ms);
     std::printf("  %-34s %10.4f ms   (%d contacts)\n", "RK4 step", rk4_ms, rk4_contacts);
     std::printf("  %-34s %10.4f ms\n", "  4 force evaluations", 4 * force_eval_ms);

@@ -1253,6 +1253,27 @@ int detail::schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&
   return iterations;
 }
 
+double detail::pair_loop_floor(const Model& m, const Points& x, Points& f) {
+  assert(use_blocks(m) && "pair_loop_floor needs the blocked layout");
+  f.setZero();
+  const int n = m.particle_count, blocks = static_cast<int>(m.blocks.size());
+  for (int b = 0; b < blocks; ++b) {
+    const Block& block = m.blocks[b];
+    int i[kLanes];
+    block_particles(b, n, i);
+    Mat3Lanes F, vP;
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
+    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x.data(), i, F);
+    const Lanes v = load(block.volume);
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) vP.m[k] = v * F.m[k];
+    scatter_forces(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, vP, i,
+                   std::min(kLanes, n - kLanes * b), f.data());
+  }
+  return m.neighbor_offset.back() * 39.0 + n * (18.0 + 9.0);
+}
+
 void detail::log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::block_width]) {
   Lanes v;
   std::memcpy(&v, a, sizeof v);

@@ -60,8 +60,8 @@ void mls_force_differential(const Model& model, const std::vector<double>& tange
 // pairs: df[q] = (df/dx) dx[q] (= -K dx[q]), q < count, each equal to mls_force_differential's
 // (the same arithmetic per direction; the tangent's F_i, S_i or R_i, the weights and, for the
 // corotational law, its rotation's linear system gathered or formed once for all of them).
-// On the calling thread; without the blocked loops (hourglass control) one product after the
-// other. dx[q] and df[q] must be distinct arrays, 3 x n.
+// On the calling thread; without the blocked loops (a Model without them) one product after
+// the other. dx[q] and df[q] must be distinct arrays, 3 x n.
 inline constexpr int kMaxDifferentials = 3;
 void mls_force_differentials(const Model& model, const std::vector<double>& tangent_F,
                              const std::vector<double>& tangent_S_or_R, int count, const Points* const* dx,
@@ -74,8 +74,8 @@ double mls_internal_forces_flops(const Model& model, const Points& x);
 
 namespace detail {
 // Whether mls_internal_forces and mls_force_differential take the vectorised loops over
-// Model::blocks (true) or the per-particle reference loops (hourglass control on, or a
-// Model without blocks). For tests: a copy of a Model with its blocks cleared runs the
+// Model::blocks (true) or the per-particle reference loops (a Model without blocks, or
+// with hourglass control but without its blocked terms). For tests: a copy of a Model with its blocks cleared runs the
 // reference loops on the same support domains, weights and volumes.
 bool uses_blocked_loops(const Model& model);
 
@@ -91,6 +91,13 @@ int polar_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model:
 int schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&R)[Model::block_width]);
 // ln a of the neo-Hookean blocked loop (packed), a in [1e-300, 1e300].
 void log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::block_width]);
+
+// The blocked force loop's memory work alone, for the benchmark: the same gathers, F
+// and scatters over the same slots, with the law replaced by P = F
+// (9 multiplications per particle; no volume term, no hourglass control). Its time is a
+// floor under every law's force evaluation on the model. Returns the flops it does, counted
+// as mls_internal_forces_flops counts the shared part. Requires the blocked layout.
+double pair_loop_floor(const Model& model, const Points& x, Points& f);
 }  // namespace detail
 
 }  // namespace palpate
