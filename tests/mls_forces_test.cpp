@@ -859,6 +859,29 @@ TEST(MlsSolid, EveryLawWithTheVolumeTermIsEnergyConsistentAndMomentumConservingW
   }
 }
 
+// The benchmark's floor loop (detail::pair_loop_floor: the blocked pair loop with P = F)
+// does the force loop's work with that "law": f_j -= v_i F_i d_j, f_i -= v_i F_i d_i, written
+// out here from the per-particle gradient and weights; and it returns the flops of the shared
+// part as mls_internal_forces_flops counts them.
+TEST(MlsSolid, PairLoopFloorIsTheForceLoopWithPEqualF) {
+  const Model m = test::model_from_json(cloud_scene(R"({"type": "jittered_grid", "per_edge": 7, "jitter": 0.3, "seed": 3})"));
+  ASSERT_TRUE(detail::uses_blocked_loops(m));
+  ASSERT_NE(m.particle_count % Model::block_width, 0);
+  const Points x = m.rest_position + random_displacement(m, 0.05, 7);
+  Points f(3, m.particle_count), expected = Points::Zero(3, m.particle_count);
+  for (int i = 0; i < m.particle_count; ++i) {
+    const Mat3 vF = m.volume[i] * deformation_gradient(m, x, i);
+    for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+      const Vec3 g = vF * m.gradient_weight.col(a);
+      expected.col(m.neighbor_index[a]) -= g;
+      expected.col(i) += g;
+    }
+  }
+  const double flops = detail::pair_loop_floor(m, x, f);
+  EXPECT_LT((f - expected).cwiseAbs().maxCoeff(), 1e-12 * expected.cwiseAbs().maxCoeff());
+  EXPECT_EQ(flops, 39.0 * m.neighbor_offset.back() + 27.0 * m.particle_count);
+}
+
 TEST(MlsSolid, VolumesFollowTheKernelSumsAndTheLattice) {
   const Model lattice = test::model_from_json(cloud_scene(kGrid, R"(, "volumes": "lattice")"));
   EXPECT_NEAR(lattice.total_volume, 1.0, 1e-12);
