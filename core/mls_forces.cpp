@@ -1274,6 +1274,89 @@ double detail::pair_loop_floor(const Model& m, const Points& x, Points& f) {
   return m.neighbor_offset.back() * 39.0 + n * (18.0 + 9.0);
 }
 
+double detail::pair_loop_floor_padded(const Model& m, const Points& x, Points& f, std::vector<double>& scratch) {
+  assert(use_blocks(m) && "pair_loop_floor_padded needs the blocked layout");
+#if defined(__AVX__)
+  const int n = m.particle_count, blocks = static_cast<int>(m.blocks.size());
+  scratch.resize(8 * static_cast<size_t>(n) + 4);
+  double* xp = scratch.data() + ((4 - (reinterpret_cast<uintptr_t>(scratch.data()) / 8) % 4) % 4);  // 32-byte aligned
+  double* fp = xp + 4 * static_cast<ptrdiff_t>(n);
+  for (int i = 0; i < n; ++i) {
+    xp[4 * i] = x(0, i), xp[4 * i + 1] = x(1, i), xp[4 * i + 2] = x(2, i), xp[4 * i + 3] = 0.0;
+  }
+  std::fill(fp, fp + 4 * static_cast<ptrdiff_t>(n), 0.0);
+  auto gather4 = [&](const int (&j)[kLanes], Lanes (&c)[3]) {
+    const __m256d r0 = _mm256_load_pd(xp + 4 * j[0]), r1 = _mm256_load_pd(xp + 4 * j[1]),
+                  r2 = _mm256_load_pd(xp + 4 * j[2]), r3 = _mm256_load_pd(xp + 4 * j[3]);
+    const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1), t2 = _mm256_unpacklo_pd(r2, r3),
+                  t3 = _mm256_unpackhi_pd(r2, r3);
+    c[0] = _mm256_permute2f128_pd(t0, t2, 0x20);
+    c[1] = _mm256_permute2f128_pd(t1, t3, 0x20);
+    c[2] = _mm256_permute2f128_pd(t0, t2, 0x31);
+  };
+  auto scatter4 = [&](const int (&j)[kLanes], const Lanes (&g)[3], int lanes) {
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d t0 = _mm256_unpacklo_pd(g[0], g[1]), t1 = _mm256_unpackhi_pd(g[0], g[1]),
+                  t2 = _mm256_unpacklo_pd(g[2], zero), t3 = _mm256_unpackhi_pd(g[2], zero);
+    const __m256d v[4] = {_mm256_permute2f128_pd(t0, t2, 0x20), _mm256_permute2f128_pd(t1, t3, 0x20),
+                          _mm256_permute2f128_pd(t0, t2, 0x31), _mm256_permute2f128_pd(t1, t3, 0x31)};
+    for (int l = 0; l < lanes; ++l) {
+      double* p = fp + 4 * j[l];
+      _mm256_store_pd(p, _mm256_sub_pd(_mm256_load_pd(p), v[l]));
+    }
+  };
+  for (int b = 0; b < blocks; ++b) {
+    const Block& block = m.blocks[b];
+    int i[kLanes];
+    block_particles(b, n, i);
+    Mat3Lanes F, vP;
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
+    Lanes xi[3];
+    gather4(i, xi);
+    const Slot* begin = m.block_slots.data() + block.slot_begin;
+    const Slot* end = m.block_slots.data() + block.slot_end;
+    for (const Slot* slot = begin; slot != end; ++slot) {
+      const Lanes d0 = load(slot->d[0]), d1 = load(slot->d[1]), d2 = load(slot->d[2]);
+      Lanes xj[3];
+      gather4(slot->j, xj);
+      PALPATE_UNROLL
+      for (int r = 0; r < 3; ++r) {
+        const Lanes x_ij = xj[r] - xi[r];
+        F(r, 0) += x_ij * d0;
+        F(r, 1) += x_ij * d1;
+        F(r, 2) += x_ij * d2;
+      }
+    }
+    const Lanes v = load(block.volume);
+    PALPATE_UNROLL
+    for (int k = 0; k < 9; ++k) vP.m[k] = v * F.m[k];
+    Lanes g[3];
+    for (const Slot* slot = begin; slot != end; ++slot) {
+      stress_times_weight(vP, slot->d, g);
+      scatter4(slot->j, g, kLanes);
+    }
+    stress_times_weight(vP, block.self_weight, g);
+    scatter4(i, g, std::min(kLanes, n - kLanes * b));
+  }
+  for (int i = 0; i < n; ++i) f(0, i) = fp[4 * i], f(1, i) = fp[4 * i + 1], f(2, i) = fp[4 * i + 2];
+  return m.neighbor_offset.back() * 39.0 + n * (18.0 + 9.0);
+#else
+  (void)scratch;
+  return pair_loop_floor(m, x, f);
+#endif
+}
+
+double detail::slot_stream_floor(const Model& m) {
+  Lanes acc = {};
+  for (int pass = 0; pass < 2; ++pass)
+    for (const Block& block : m.blocks)
+      for (const Slot* slot = m.block_slots.data() + block.slot_begin; slot != m.block_slots.data() + block.slot_end;
+           ++slot)
+        acc += load(slot->d[0]) + load(slot->d[1]) + load(slot->d[2]) + Lanes{double(slot->j[0]), 0, 0, 0};
+  return acc[0] + acc[1] + acc[2] + acc[3];
+}
+
 void detail::log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::block_width]) {
   Lanes v;
   std::memcpy(&v, a, sizeof v);
