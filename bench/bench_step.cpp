@@ -160,7 +160,7 @@ int main(int argc, char** argv) {
     std::vector<double> ms;
   };
   enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_first, ie_free, health,
-         pair_floor, pair_floor_padded, slot_stream, op_count };
+         pair_floor, op_count };
   // The blocked force loop's memory work alone (detail::pair_loop_floor), one thread.
   const bool floor_timed = is_mls && detail::uses_blocked_loops(model);
   // Everything timed at one thread count: its own State (and pool), force buffers, options.
@@ -169,8 +169,6 @@ int main(int argc, char** argv) {
     State timed;
     WorkerThreads force_threads;
     Points f, df;
-    std::vector<double> padded;
-    double sink = 0;
     Workspace linearized;
     Options rk4_opt, se_opt, ie_opt;
     std::optional<State> fresh;  // the fresh State of the first implicit-Euler step
@@ -202,10 +200,6 @@ int main(int argc, char** argv) {
     ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
     auto pair_loop_alone = [&model, &start_position, &w] { (void)detail::pair_loop_floor(model, start_position, w.f); };
     ops[pair_floor] = {pair_loop_alone, pair_loop_alone, floor_timed && c == 1 ? repeats : 0, {}};
-    auto padded_alone = [&model, &start_position, &w] { (void)detail::pair_loop_floor_padded(model, start_position, w.df, w.padded); };
-    ops[pair_floor_padded] = {padded_alone, padded_alone, floor_timed && c == 1 ? repeats : 0, {}};
-    auto stream_alone = [&model, &w] { w.sink += detail::slot_stream_floor(model); };
-    ops[slot_stream] = {stream_alone, stream_alone, floor_timed && c == 1 ? repeats : 0, {}};
     // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
     auto apply_tangent = [&model, &start, &w] { elastic_force_differential(model, w.linearized, start.saved().velocity, w.df); };
     ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
@@ -291,10 +285,8 @@ int main(int argc, char** argv) {
   // The floor under the force evaluation: its gathers, F and scatters with P = F; the law's loop
   // at that time would reach `ceiling` of the double peak.
   double floor_ms = NAN, floor_ceiling = NAN;
-  double padded_floor_ms = NAN;
   if (floor_timed) {
     floor_ms = med(pair_floor);
-    padded_floor_ms = med(pair_floor_padded);
     if (peak.double_gflops > 0) floor_ceiling = flops / (floor_ms * 1e6) / peak.double_gflops;
   }
   const double gflops = flops / (force_eval_ms * 1e6);
@@ -319,7 +311,6 @@ int main(int argc, char** argv) {
   j["peak_double_gflops"] = peak.double_gflops;
   j["peak_single_gflops"] = peak.single_gflops;
   j["pair_loop_floor_ms"] = floor_timed ? nlohmann::json(floor_ms) : nlohmann::json(nullptr);
-  j["pair_loop_floor_padded_ms"] = floor_timed ? nlohmann::json(padded_floor_ms) : nlohmann::json(nullptr);
   j["pair_loop_floor_ns_per_pair"] = floor_timed && nnz > 0 ? nlohmann::json(floor_ms * 1e6 / nnz) : nlohmann::json(nullptr);
   j["force_eval_ceiling_fraction_of_peak"] =
       floor_timed && peak.double_gflops > 0 ? nlohmann::json(floor_ceiling) : nlohmann::json(nullptr);
@@ -399,12 +390,6 @@ int main(int argc, char** argv) {
                   "  %-34s %10s      force evaluation's flops would reach %.0f %% of the double peak\n",
                   "  its pair loop alone (P = F)", floor_ms, floor_ms * 1e6 / nnz, 100 * floor_ms / force_eval_ms, "",
                   "", 100 * floor_ceiling);
-    if (floor_timed)
-      std::printf("  %-34s %10.4f ms   %.2f ns per pair\n", "  the same, padded xyz0 rows", padded_floor_ms,
-                  padded_floor_ms * 1e6 / nnz);
-    if (floor_timed)
-      std::printf("  %-34s %10.4f ms   %.2f ns per pair\n", "  reading the slots twice", median(ops[slot_stream].ms),
-                  median(ops[slot_stream].ms) * 1e6 / nnz);
     std::printf("  %-34s %10.4f ms\n", "mls_force_differential (K dx)", tangent_ms);
     std::printf("  %-34s %10.4f ms   (%d contacts)\n", "RK4 step", rk4_ms, rk4_contacts);
     std::printf("  %-34s %10.4f ms\n", "  4 force evaluations", 4 * force_eval_ms);

@@ -98,11 +98,6 @@ void log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::b
 // floor under every law's force evaluation on the model. Returns the flops it does, counted
 // as mls_internal_forces_flops counts the shared part. Requires the blocked layout.
 double pair_loop_floor(const Model& model, const Points& x, Points& f);
-// The same with x and f held as padded xyz0 rows (one 256-bit load or store per lane and a
-// 4x4 transpose instead of three scalar accesses per lane), in scratch (resized once).
-double pair_loop_floor_padded(const Model& model, const Points& x, Points& f, std::vector<double>& scratch);
-// Reading the neighbour slots twice and nothing else (the slot data the two passes stream).
-double slot_stream_floor(const Model& model);
 }  // namespace detail
 
 }  // namespace palpate
