@@ -262,6 +262,7 @@ int main(int argc, char** argv) {
   check(step(model, rk4_opt, timed));
   const int rk4_contacts = static_cast<int>(timed.contact_index.size());
   const int rk4_candidates = static_cast<int>(timed.out.contact_candidate.size());
+  const int rk4_pivots = timed.out.contact_iterations;  // both projections' LCP iterations
   restore();
   check(step(model, ie_opt, timed));
   check(step(model, ie_opt, timed));
@@ -323,6 +324,7 @@ int main(int argc, char** argv) {
       {"vector_updates_ms", rk4_free_ms - 4 * force_eval_ms},
       {"contact_ms", rk4_contact_ms},
       {"contact_candidates", rk4_candidates},
+      {"contact_pivots", rk4_pivots},
       {"other_ms", rk4_ms - rk4_free_ms - rk4_contact_ms},
   };
   j["symplectic_euler_step_ms"] = se_ms;
@@ -394,7 +396,8 @@ int main(int argc, char** argv) {
     std::printf("  %-34s %10.4f ms   (%d contacts)\n", "RK4 step", rk4_ms, rk4_contacts);
     std::printf("  %-34s %10.4f ms\n", "  4 force evaluations", 4 * force_eval_ms);
     std::printf("  %-34s %10.4f ms\n", "  vector updates (free motion rest)", rk4_free_ms - 4 * force_eval_ms);
-    std::printf("  %-34s %10.4f ms   (%d candidates)\n", "  contact solve", rk4_contact_ms, rk4_candidates);
+    std::printf("  %-34s %10.4f ms   (%d candidates, %d pivots)\n", "  contact solve", rk4_contact_ms, rk4_candidates,
+                rk4_pivots);
     std::printf("  %-34s %10.4f ms\n", "  other", rk4_ms - rk4_free_ms - rk4_contact_ms);
     std::printf("  %-34s %10.4f ms\n", "symplectic-Euler step", se_ms);
     std::printf("  %-34s %10.4f ms\n", "  free motion", se_free_ms);

@@ -92,25 +92,34 @@ class LumpedDelassus {
  public:
   LumpedDelassus(const double* d, const double* u) : d_(d), u_(u) {}
   bool solve_active(int k, const int* members, double* b) {
-    Eigen::Matrix3d G = Eigen::Matrix3d::Identity();
-    Vec3 t = Vec3::Zero();
+    // G's lower triangle and t = U_A^T y, accumulated by hand (Eigen's rankUpdate of a
+    // 3 x 3 is an out-of-line call per row, most of a pivot's cost).
+    double g00 = 1, g10 = 0, g11 = 1, g20 = 0, g21 = 0, g22 = 1;
+    double t0 = 0, t1 = 0, t2 = 0;
     for (int r = 0; r < k; ++r) {
       const int a = members[r];
-      const Vec3 u = row(a);
-      b[r] /= d_[a];
-      G.selfadjointView<Eigen::Lower>().rankUpdate(u, 1.0 / d_[a]);
-      t += u * b[r];
+      const double inv_d = 1.0 / d_[a];
+      const double ux = u_[3 * a], uy = u_[3 * a + 1], uz = u_[3 * a + 2];
+      const double y = b[r] * inv_d;
+      b[r] = y;
+      g00 += ux * ux * inv_d, g10 += uy * ux * inv_d, g11 += uy * uy * inv_d;
+      g20 += uz * ux * inv_d, g21 += uz * uy * inv_d, g22 += uz * uz * inv_d;
+      t0 += ux * y, t1 += uy * y, t2 += uz * y;
     }
+    Eigen::Matrix3d G;
+    G << g00, 0, 0, g10, g11, 0, g20, g21, g22;
     const Eigen::LLT<Eigen::Matrix3d> llt(G);  // reads the lower triangle
     if (llt.info() != Eigen::Success) return false;
-    const Vec3 z = llt.solve(t);
-    s_.setZero();  // U_A^T lambda_A, for coupling()
+    const Vec3 z = llt.solve(Vec3(t0, t1, t2));
+    double s0 = 0, s1 = 0, s2 = 0;  // U_A^T lambda_A, for coupling()
     for (int r = 0; r < k; ++r) {
       const int a = members[r];
-      const Vec3 u = row(a);
-      b[r] -= u.dot(z) / d_[a];
-      s_ += u * b[r];
+      const double ux = u_[3 * a], uy = u_[3 * a + 1], uz = u_[3 * a + 2];
+      const double lambda = b[r] - (ux * z[0] + uy * z[1] + uz * z[2]) / d_[a];
+      b[r] = lambda;
+      s0 += ux * lambda, s1 += uy * lambda, s2 += uz * lambda;
     }
+    s_ = Vec3(s0, s1, s2);
     return true;
   }
   double coupling(int a) const { return row(a).dot(s_); }
@@ -150,9 +159,16 @@ int projected_gauss_seidel(int m, Op& W, const double* g, double* lambda, double
   return -1;
 }
 
-// Principal pivoting (docs/physics.md §2, "The LCP solver"): guess the active set
-// ({g < 0} unless given), solve W_AA lambda_A = -g_A, drop the most negative multiplier or
-// add the most violated gap, repeat; projected Gauss-Seidel finishes if it does not settle.
+// Block principal pivoting (docs/physics.md §2, "The LCP solver"; Judice and Pires 1994):
+// guess the active set A ({g < 0} unless given), solve W_AA lambda_A = -g_A, and find the
+// infeasible candidates: members with a negative multiplier, others whose gap
+// w_a = g_a + (W lambda)_a is violated beyond the tolerance. None: solved. Otherwise flip
+// them all (a block pivot) while their number keeps falling to a new low, or for
+// kBlockPivotTries more pivots; then flip only the lowest-indexed one (Murty's rule, finite
+// for the positive definite W) until the number falls below its low again. Projected
+// Gauss-Seidel finishes if max_iterations pivots do not settle it.
+constexpr int kBlockPivotTries = 3;
+
 template <class Op>
 int principal_pivoting(int m, Op& W, const double* g, double* lambda, double tolerance, int max_iterations,
                        Workspace& work, const int* initial_active) {
@@ -162,7 +178,10 @@ int principal_pivoting(int m, Op& W, const double* g, double* lambda, double tol
   double* rhs = work.pivot_rhs.data();
   work.members.resize(m);
   int* members = work.members.data();
+  work.infeasible.resize(m);
+  int* infeasible = work.infeasible.data();
   for (int a = 0; a < m; ++a) active[a] = initial_active ? initial_active[a] != 0 : g[a] < 0;
+  int fewest = m + 1, tries = kBlockPivotTries;
   for (int iteration = 1; iteration <= max_iterations; ++iteration) {
     int k = 0;
     for (int a = 0; a < m; ++a)
@@ -170,31 +189,20 @@ int principal_pivoting(int m, Op& W, const double* g, double* lambda, double tol
     for (int r = 0; r < k; ++r) rhs[r] = -g[members[r]];
     std::fill(lambda, lambda + m, 0.0);
     if (!W.solve_active(k, members, rhs)) break;
-    int drop = -1;
-    double most_negative = 0;
-    for (int r = 0; r < k; ++r) {
-      lambda[members[r]] = rhs[r];
-      if (rhs[r] < most_negative) {
-        most_negative = rhs[r];
-        drop = members[r];
-      }
+    for (int r = 0; r < k; ++r) lambda[members[r]] = rhs[r];
+    int count = 0;
+    for (int a = 0; a < m; ++a)
+      if (active[a] ? lambda[a] < 0 : g[a] + W.coupling(a) < -tolerance) infeasible[count++] = a;
+    if (count == 0) return iteration;
+    if (count < fewest) {
+      fewest = count;
+      tries = kBlockPivotTries;
+    } else if (tries > 0) {
+      --tries;
+    } else {
+      count = 1;  // Murty: the lowest index only
     }
-    if (drop >= 0) {
-      active[drop] = 0;
-      continue;
-    }
-    int add = -1;
-    double most_violated = -tolerance;
-    for (int a = 0; a < m; ++a) {
-      if (active[a]) continue;
-      const double w = g[a] + W.coupling(a);
-      if (w < most_violated) {
-        most_violated = w;
-        add = a;
-      }
-    }
-    if (add < 0) return iteration;
-    active[add] = 1;
+    for (int c = 0; c < count; ++c) active[infeasible[c]] ^= 1;
   }
   // Pivoting did not settle: finish with projected Gauss-Seidel from the clipped iterate.
   for (int a = 0; a < m; ++a) lambda[a] = std::max(0.0, lambda[a]);

@@ -174,6 +174,7 @@ struct Workspace {
   std::vector<double> solve_buffer;    // scratch of the active-set solve
   std::vector<int> active;             // active-set membership (0/1 per candidate)
   std::vector<int> members;            // indices of the active candidates
+  std::vector<int> infeasible;         // m: the candidates a pivot flips
   // The threads of the force loops (Options' integrator.threads; use_threads()). Not copied
   // with the State: a copy makes its own pool at its first step.
   WorkerThreads threads;
