@@ -192,8 +192,23 @@ Model quarter_level_model(const Scene& scene, int per_edge, const LargeStrainLat
   if (((faces & face_x_min) != 0) != ((faces & face_x_max) != 0) ||
       ((faces & face_y_min) != 0) != ((faces & face_y_max) != 0))
     throw std::invalid_argument("the quarter-block reference needs fixed faces symmetric about the site");
-  if (!scene.fixed_regions.empty() || !scene.material.inclusions.empty())
-    throw std::invalid_argument("the quarter-block reference needs a homogeneous body without fixed regions");
+  if (!scene.fixed_regions.empty())
+    throw std::invalid_argument("the quarter-block reference needs a body without fixed regions");
+  // Inclusions are blended into the bricks as in the linear reference (1.16); the quarter and
+  // its mirror planes hold only if each is symmetric about both planes through the site.
+  const double symmetry_tolerance = 1e-9 * scene.box.max.norm();
+  for (size_t k = 0; k < scene.material.inclusions.size(); ++k) {
+    const InclusionSpec& inc = scene.material.inclusions[k];
+    const std::string where = "material.inclusions[" + std::to_string(k) + "]: ";
+    if (inc.shape == InclusionShape::group)
+      throw std::invalid_argument(where + "the quarter-block reference takes sphere and box inclusions only");
+    for (int axis = 0; axis < 2; ++axis) {
+      const double middle = inc.shape == InclusionShape::sphere ? inc.center[axis] : 0.5 * (inc.min[axis] + inc.max[axis]);
+      if (std::abs(middle - site[axis]) > symmetry_tolerance)
+        throw std::invalid_argument(where + "the quarter-block reference needs inclusions centred on the tool's axis "
+                                            "(symmetric about both mirror planes through the site)");
+    }
+  }
   if (!scene.box_given || std::abs(site[0] - 0.5 * (scene.box.min[0] + scene.box.max[0])) > 1e-9 * scene.box.max.norm() ||
       std::abs(site[1] - 0.5 * (scene.box.min[1] + scene.box.max[1])) > 1e-9 * scene.box.max.norm())
     throw std::invalid_argument("the quarter-block reference is computed at the centre of the top face of a box");
@@ -222,7 +237,8 @@ Model quarter_level_model(const Scene& scene, int per_edge, const LargeStrainLat
     for (int b = 0; b < per_edge; ++b)
       for (int a = 0; a < per_edge; ++a, ++i) m.rest_position.col(i) = Vec3(coord[0][a], coord[1][b], coord[2][c]);
   m.hex = hex_mesh(m.rest_position, Eigen::Vector3i::Constant(per_edge), m.lame_lambda, m.lame_mu,
-                   HexFormulation::neo_hookean, HexVolumetricIntegration::full);
+                   HexFormulation::neo_hookean, HexVolumetricIntegration::full,
+                   scene.material.inclusions.empty() ? nullptr : &scene.material);
   return m;
 }
 

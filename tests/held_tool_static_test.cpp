@@ -248,5 +248,42 @@ TEST(LargeStrainReference, AtSmallDepthItIsTheLinearBlock) {
   EXPECT_EQ(back.forces, nh.forces);
 }
 
+// The quarter-block family with an inclusion on the tool's axis (1.16 in the bricks): one of
+// the matrix's modulus changes no force; one 10x stiffer, 0.5 m below the contact point,
+// raises the force at a small depth by the factor the converged linear references of the
+// homogeneous and heterogeneous cube give (their depths at 10.36 N: F ~ d^(3/2) at a fixed
+// depth; 1.084), within 2 % on every level (1.081, 1.087, 1.097 on 7, 9, 11 nodes per axis);
+// an inclusion off the axis is refused, naming it.
+TEST(LargeStrainReference, AnInclusionOnTheAxisOfTheQuarterBlock) {
+  auto with = [](const std::string& E, const std::string& center = "[0, 0, -0.5]") {
+    return test::scene_from_json(R"({"material": {"law": "neo_hookean", "inclusions": [{"sphere": {"center": )" + center +
+                                 R"(, "radius": 0.25}, "young_modulus": )" + E + R"(, "poisson_ratio": 0.3}]}})");
+  };
+  LargeStrainLattice lattice;
+  lattice.core_half_width = 0.3;
+  const Scene homogeneous = test::scene_from_json(R"({"material": {"law": "neo_hookean"}})");
+  const Reference h0 = load_reference(PALPATE_SOURCE_DIR "/scenes/references/hertz_cube.json");
+  const Reference h10 = load_reference(PALPATE_SOURCE_DIR "/scenes/references/hertz_cube_inclusion_10x.json");
+  const double d = reference_indentation(h10, 10.36);
+  const double expected = std::pow(reference_indentation(h0, 10.36) / d, 1.5);
+  const std::vector<int> levels{7, 9, 11};
+  const Reference plain = large_strain_reference(homogeneous, {d}, levels, {}, lattice);
+  const Reference same = large_strain_reference(with("1e4"), {d}, levels, {}, lattice);
+  const Reference stiff = large_strain_reference(with("1e5"), {d}, levels, {}, lattice);
+  EXPECT_NE(plain.key, stiff.key);
+  for (size_t k = 0; k < levels.size(); ++k) {
+    EXPECT_EQ(same.levels[k].forces, plain.levels[k].forces) << "level " << levels[k];
+    const double ratio = stiff.levels[k].forces[0] / plain.levels[k].forces[0];
+    EXPECT_NEAR(ratio, expected, 0.02 * expected) << "level " << levels[k];
+  }
+  EXPECT_GT(expected, 1.05);  // the inclusion matters at this depth
+  try {
+    large_strain_reference(with("1e5", "[0.1, 0, -0.5]"), {d}, levels, {}, lattice);
+    FAIL() << "an inclusion off the tool's axis was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("material.inclusions[0]"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace palpate
