@@ -34,7 +34,8 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
                         large-strain reference"): neo-Hookean bricks on the graded lattices
                         (--levels; default 17,21,25,29), the tool held at each depth
                         (m, increasing) below first touch at the centre, Richardson on the
-                        force; for palpate-verify --reference FILE on neo-Hookean scenes
+                        force; for palpate-verify --reference FILE on neo-Hookean scenes;
+                        inclusions must be spheres or boxes centred on the tool's axis
   --core-half-width W   with --depths: the quarter-block family instead (docs/physics.md §5):
                         a quarter of the block with mirror planes through the site, each
                         axis uniform over W (m) from the site with --core-share of its
