@@ -21,7 +21,8 @@
 #
 # Writes DIR/<mesh>.msh, one palpate-verify JSON per run and DIR/summary.md (default DIR
 # build/inclusion_study). Resumes: a run whose JSON exists is skipped (FRESH=1 starts
-# over). About 10 min for the MLS and 40 for the FEM on one core. BUILD_DIR (default build).
+# over). About 10 min for the MLS, 25 for the FEM and 6 for the family on one core.
+# BUILD_DIR (default build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD_DIR=${BUILD_DIR:-build}
