@@ -248,12 +248,14 @@ TEST(LargeStrainReference, AtSmallDepthItIsTheLinearBlock) {
   EXPECT_EQ(back.forces, nh.forces);
 }
 
-// The quarter-block family with an inclusion on the tool's axis (1.16 in the bricks): one of
-// the matrix's modulus changes no force; one 10x stiffer, 0.5 m below the contact point,
-// raises the force at a small depth by the factor the converged linear references of the
-// homogeneous and heterogeneous cube give (their depths at 10.36 N: F ~ d^(3/2) at a fixed
-// depth; 1.084), within 2 % on every level (1.081, 1.087, 1.097 on 7, 9, 11 nodes per axis);
-// an inclusion off the axis is refused, naming it.
+// The quarter-block family with an inclusion on the tool's axis (1.16 in the bricks): one 10x
+// stiffer than the matrix, 0.5 m below the contact point, raises the force at a small depth by
+// the factor the converged linear references of the homogeneous and heterogeneous cube give
+// (their depths at 10.36 N: F ~ d^(3/2) at a fixed depth; 1.084), within 2 % on every level
+// (1.081, 1.087, 1.091 on 7, 9, 10 nodes per axis; 8 gives 1.107 and 11 1.097, the coarse
+// bricks blending the sphere unevenly); an inclusion off the axis is refused, naming it.
+// (That a matrix-modulus inclusion changes nothing is material_field_test's.) Coarse levels:
+// this test runs under the sanitizers too.
 TEST(LargeStrainReference, AnInclusionOnTheAxisOfTheQuarterBlock) {
   auto with = [](const std::string& E, const std::string& center = "[0, 0, -0.5]") {
     return test::scene_from_json(R"({"material": {"law": "neo_hookean", "inclusions": [{"sphere": {"center": )" + center +
@@ -266,13 +268,11 @@ TEST(LargeStrainReference, AnInclusionOnTheAxisOfTheQuarterBlock) {
   const Reference h10 = load_reference(PALPATE_SOURCE_DIR "/scenes/references/hertz_cube_inclusion_10x.json");
   const double d = reference_indentation(h10, 10.36);
   const double expected = std::pow(reference_indentation(h0, 10.36) / d, 1.5);
-  const std::vector<int> levels{7, 9, 11};
+  const std::vector<int> levels{7, 9, 10};
   const Reference plain = large_strain_reference(homogeneous, {d}, levels, {}, lattice);
-  const Reference same = large_strain_reference(with("1e4"), {d}, levels, {}, lattice);
   const Reference stiff = large_strain_reference(with("1e5"), {d}, levels, {}, lattice);
   EXPECT_NE(plain.key, stiff.key);
   for (size_t k = 0; k < levels.size(); ++k) {
-    EXPECT_EQ(same.levels[k].forces, plain.levels[k].forces) << "level " << levels[k];
     const double ratio = stiff.levels[k].forces[0] / plain.levels[k].forces[0];
     EXPECT_NEAR(ratio, expected, 0.02 * expected) << "level " << levels[k];
   }
