@@ -188,6 +188,7 @@ Scene level_scene(const Scene& scene, int per_edge, HexFormulation formulation, 
 // the solver's, HeldToolOptions::mirror_axes).
 Model quarter_level_model(const Scene& scene, int per_edge, const LargeStrainLattice& lattice, double& spacing) {
   const Eigen::Vector2d site = indenter_site(scene);
+  const double symmetry_tolerance = 1e-9 * scene.box.max.norm();  // the site and inclusions on the mirror planes
   const uint32_t faces = scene.fixed_faces;
   if (((faces & face_x_min) != 0) != ((faces & face_x_max) != 0) ||
       ((faces & face_y_min) != 0) != ((faces & face_y_max) != 0))
@@ -196,7 +197,6 @@ Model quarter_level_model(const Scene& scene, int per_edge, const LargeStrainLat
     throw std::invalid_argument("the quarter-block reference needs a body without fixed regions");
   // Inclusions are blended into the bricks as in the linear reference (1.16); the quarter and
   // its mirror planes hold only if each is symmetric about both planes through the site.
-  const double symmetry_tolerance = 1e-9 * scene.box.max.norm();
   for (size_t k = 0; k < scene.material.inclusions.size(); ++k) {
     const InclusionSpec& inc = scene.material.inclusions[k];
     const std::string where = "material.inclusions[" + std::to_string(k) + "]: ";
@@ -209,8 +209,8 @@ Model quarter_level_model(const Scene& scene, int per_edge, const LargeStrainLat
                                             "(symmetric about both mirror planes through the site)");
     }
   }
-  if (!scene.box_given || std::abs(site[0] - 0.5 * (scene.box.min[0] + scene.box.max[0])) > 1e-9 * scene.box.max.norm() ||
-      std::abs(site[1] - 0.5 * (scene.box.min[1] + scene.box.max[1])) > 1e-9 * scene.box.max.norm())
+  if (!scene.box_given || std::abs(site[0] - 0.5 * (scene.box.min[0] + scene.box.max[0])) > symmetry_tolerance ||
+      std::abs(site[1] - 0.5 * (scene.box.min[1] + scene.box.max[1])) > symmetry_tolerance)
     throw std::invalid_argument("the quarter-block reference is computed at the centre of the top face of a box");
   const int intervals = per_edge - 1;
   const int core = static_cast<int>(std::lround(lattice.core_share * intervals));

@@ -80,8 +80,8 @@ if [ "$only" != fem ]; then
     msh=$out/$name.msh
     [ -s "$msh" ] || scripts/make_mesh.sh --focus-size "$h0" --far-size "$far" --growth "$growth" \
       --refine 0 0 -0.5 0.25 "$hinc" --node-order morton --out "$msh" > /dev/null
-    # dt: symplectic Euler is stable at 1 ms down to about 0.02 m spacing at 10x; finer
-    # clouds take 0.5 ms.
+    # dt: 1 ms, the scene's; the finest cloud at 0.5 ms as a precaution (palpate-stable-dt
+    # at 10x and 327.6 N finds r2 stable up to 4.3 ms and r3 up to 3.2 ms).
     dt=0.001
     case "$name" in r3) dt=0.0005 ;; esac
     mls=(--scene scenes/hertz_cube_inclusion.json --set "body.distribution.file=$(realpath "$msh")"
