@@ -259,11 +259,13 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (!check_default_scene(args.options)) return 1;
   std::signal(SIGPIPE, SIG_IGN);
-  // Before any thread exists: the signals are blocked and delivered to the event loop.
+  // Before any thread exists: the signals are blocked and delivered to the event loop. Also
+  // before the first model is built: the build's sparse Cholesky (CHOLMOD) may start OpenMP
+  // threads, and a thread started with SIGTERM unblocked would take it and kill the process.
   kj::UnixEventPort::captureSignal(SIGINT);
   kj::UnixEventPort::captureSignal(SIGTERM);
+  if (!check_default_scene(args.options)) return 1;
 
   // The RPC thread streams the 1 kHz frames: below the simulation threads'
   // SCHED_FIFO priority (10) but above ordinary load. Silently kept SCHED_OTHER
