@@ -8,6 +8,15 @@
 
 namespace palpate::test {
 
+// True in the sanitized builds (PALPATE_SANITIZE): there the static solves' small Eigen
+// algebra runs 60-100x slower than in Release, so the heaviest tests solve smaller problems
+// that take the same code paths, with the same checks.
+#ifdef PALPATE_SANITIZED
+inline constexpr bool kSanitized = true;
+#else
+inline constexpr bool kSanitized = false;
+#endif
+
 // A scene from inline JSON (validated like a file).
 inline Scene scene_from_json(const std::string& json) { return parse_scene(json, "inline-test-scene", "."); }
 
