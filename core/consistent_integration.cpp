@@ -5,6 +5,10 @@
 #include <cmath>
 #include <stdexcept>
 
+// libgomp's (CHOLMOD's OpenMP runtime; declared here rather than through <omp.h>, which not
+// every compiler ships).
+extern "C" void omp_set_max_active_levels(int levels);
+
 namespace palpate {
 
 namespace {
@@ -75,6 +79,11 @@ IntegrationCorrection make_integration_consistent(Model& m, const std::vector<ui
   // A tiny Tikhonov term keeps the factorisation defined if constraints are dependent.
   for (int r = 0; r < rows; ++r) BBt.coeffRef(r, r) += 1e-12;
   // Supernodal Cholesky (CHOLMOD): most of a model's build time went to this factorisation.
+  // On the calling thread only, and one thread: CHOLMOD's OpenMP loops would start worker
+  // threads that inherit a session thread's real-time priority and core, spin after the
+  // build, and are invisible to ThreadSanitizer. No active parallel level: every OpenMP region
+  // this thread meets runs on it alone (the setting is this thread's own ICV).
+  omp_set_max_active_levels(0);
   Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Lower> cholesky;
   cholesky.cholmod().print = 0;
   cholesky.compute(BBt);

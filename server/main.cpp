@@ -261,8 +261,9 @@ int main(int argc, char** argv) {
   }
   std::signal(SIGPIPE, SIG_IGN);
   // Before any thread exists: the signals are blocked and delivered to the event loop. Also
-  // before the first model is built: the build's sparse Cholesky (CHOLMOD) may start OpenMP
-  // threads, and a thread started with SIGTERM unblocked would take it and kill the process.
+  // before the first model is built: a library the build calls could start a thread (CHOLMOD's
+  // OpenMP did, before core kept it to one), and a thread started with SIGTERM unblocked would
+  // take it and kill the process.
   kj::UnixEventPort::captureSignal(SIGINT);
   kj::UnixEventPort::captureSignal(SIGTERM);
   if (!check_default_scene(args.options)) return 1;
