@@ -137,6 +137,8 @@ void indenter_free_motion(const Model& model, const Options& opt, State& state, 
 
 namespace {
 
+struct MotionSums;
+
 // One RK4 stage at coordinate k (T = double or Lanes): with the stage's velocity v_s and
 // acceleration a_s, add k_s = (v_s, a_s) with its weight to the sums and form the next
 // stage x_{s+1} = x_0 + h v_s, v_{s+1} = v_0 + h a_s. v_stage may be the stage's own input.
@@ -150,6 +152,7 @@ struct Rk4Stage {
   double* v_next;
   double h, weight;
   bool first;
+  MotionSums* sums = nullptr;  // none taken (the update passes' common interface)
   template <class T>
   void operator()(int k, const T& a, const T& /*mass*/) const {
     const T v = load<T>(v_in + k);
@@ -172,6 +175,12 @@ struct MotionSums {
   void add(double m, double v, double x) {
     kinetic += m * v * v;
     position += x;
+  }
+  void add(const MotionSums& o) {
+    kinetic_lanes += o.kinetic_lanes;
+    position_lanes += o.position_lanes;
+    kinetic += o.kinetic;
+    position += o.position;
   }
   void write(StepOutputs& w) const {
     w.free_motion_kinetic = 0.5 * (kinetic + (kinetic_lanes[0] + kinetic_lanes[1]) + (kinetic_lanes[2] + kinetic_lanes[3]));
@@ -216,24 +225,48 @@ struct SymplecticEulerUpdate {
 };
 
 // Calls update(k, a_k, m_k) for every coordinate k with the acceleration a(f, v) there
-// and the particle's mass.
+// and the particle's mass, over particles [begin, end) (begin a multiple of kGroup: groups
+// of four first, then the rest one by one).
 template <class Update>
-void for_each_acceleration(const Model& model, const Options& opt, const double* f, const double* v,
-                           const Update& update) {
-  const Acceleration accel(model, opt);
-  const int n = model.particle_count, groups = n / kGroup;
+void accelerations_in_range(const Acceleration& accel, const Model& model, int begin, int end, const double* f,
+                            const double* v, const Update& update) {
+  const int groups_end = begin + (end - begin) / kGroup * kGroup;
   const double* mass = model.mass.data();
-  for (int p = 0; p < groups; ++p) {
+  for (int i0 = begin; i0 < groups_end; i0 += kGroup) {
+    const int p = i0 / kGroup;
     Lanes a[3];
     group_accelerations(accel, p, f, v, a);
     const double* m = mass + kGroup * p;
     const Lanes m_lanes[3] = {Lanes{m[0], m[0], m[0], m[1]}, Lanes{m[1], m[1], m[2], m[2]}, Lanes{m[2], m[3], m[3], m[3]}};
     for (int q = 0; q < 3; ++q) update(3 * kGroup * p + kGroup * q, a[q], m_lanes[q]);
   }
-  for (int i = kGroup * groups; i < n; ++i) {
+  for (int i = groups_end; i < end; ++i) {
     const Vec3 a = accel(i, f + 3 * i, v + 3 * i);
     for (int c = 0; c < 3; ++c) update(3 * i + c, a[c], mass[i]);
   }
+}
+
+// accelerations_in_range over every particle; on the threads' pool when there is one:
+// thread t takes a contiguous range of whole groups (the last one the remaining particles
+// too) with sums of its own, added into update.sums in the order t = 0, 1, ... Each
+// coordinate's update is the same arithmetic for any thread count; only the sums' rounding
+// depends on it.
+template <class Update>
+void for_each_acceleration(const Model& model, const Options& opt, const double* f, const double* v,
+                           const Update& update, WorkerThreads& threads) {
+  const Acceleration accel(model, opt);
+  const int n = model.particle_count, T = threads.count();
+  if (T == 1) return accelerations_in_range(accel, model, 0, n, f, v, update);
+  const int groups = n / kGroup;
+  MotionSums partial[kMaxThreads];
+  threads.pool->run([&](int t) {
+    Update own = update;
+    if (update.sums) own.sums = &partial[t];
+    const int begin = kGroup * (groups * t / T), end = t + 1 == T ? n : kGroup * (groups * (t + 1) / T);
+    accelerations_in_range(accel, model, begin, end, f, v, own);
+  });
+  if (update.sums)
+    for (int t = 0; t < T; ++t) update.sums->add(partial[t]);
 }
 
 }  // namespace
@@ -259,14 +292,14 @@ void free_motion_rk4(const Model& model, const Options& opt, State& state) {
     add_contact_forces(state, w.force);
     const Rk4Stage stage{state.position.data(), state.velocity.data(), v_s.data(), x_sum.data(), v_sum.data(),
                          x_stage.data(), v_stage.data(), next_h[s], weight[s], s == 0};
-    for_each_acceleration(model, opt, w.force.data(), v_s.data(), stage);
+    for_each_acceleration(model, opt, w.force.data(), v_s.data(), stage, w.threads);
   }
   elastic_forces(model, x_stage, w.force, w.threads);
   add_contact_forces(state, w.force);
   MotionSums sums;
   const Rk4Update update{v_stage.data(), x_sum.data(), v_sum.data(), state.position.data(), state.velocity.data(),
                          dt / 6.0, &sums};
-  for_each_acceleration(model, opt, w.force.data(), v_stage.data(), update);
+  for_each_acceleration(model, opt, w.force.data(), v_stage.data(), update, w.threads);
   sums.write(state.out);
   indenter_free_motion(model, opt, state, dt);
 }
@@ -278,7 +311,7 @@ void free_motion_symplectic_euler(const Model& model, const Options& opt, State&
   add_contact_forces(state, w.force);
   MotionSums sums;
   const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt, &sums};
-  for_each_acceleration(model, opt, w.force.data(), state.velocity.data(), update);
+  for_each_acceleration(model, opt, w.force.data(), state.velocity.data(), update, w.threads);
   sums.write(state.out);
   tool_free_motion(model, opt, state);
 }

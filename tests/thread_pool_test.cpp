@@ -183,44 +183,63 @@ TEST(ParallelForces, PerParticleLoopsStayOnOneThread) {
   EXPECT_TRUE(bit_identical(f1, f2));
 }
 
-// The accurate haptic scene pressed with 120 N for `steps` steps on `threads` threads.
+// A scene pressed with `force` for `steps` steps on `threads` threads.
 struct PressedRun {
   Points position;
   Vec3 indenter{0, 0, 0}, contact{0, 0, 0};
+  double kinetic = 0, position_sum = 0;  // the last update pass's sums (health.h)
 };
-PressedRun pressed_run(const test::Setup& s, int threads, int steps) {
+PressedRun pressed_run(const test::Setup& s, int threads, int steps, double force) {
   Options opt = s.opt;
   opt.integrator.threads = threads;
   State state = make_state(s.model, opt);
   EXPECT_EQ(state.work.threads.count(), threads);
   state.indenter_center.z() = s.model.touch_height;
-  state.force_command = press_down(120.0);
+  state.force_command = press_down(force);
   for (int k = 0; k < steps; ++k) {
     const StepStatus status = step(s.model, opt, state);
     EXPECT_FALSE(is_fault(status)) << to_string(status) << " at step " << k;
   }
   EXPECT_GT(state.contact_index.size(), 0u);
-  return {state.position, state.indenter_center, state.indenter_contact_force};
+  return {state.position, state.indenter_center, state.indenter_contact_force, state.out.free_motion_kinetic,
+          state.out.free_motion_position_sum};
 }
 
-TEST(ParallelForces, PressedRunIsBitIdenticalForAGivenThreadCount) {
-  const test::Setup s =
-      test::setup_from(load_scene(std::filesystem::path(PALPATE_SOURCE_DIR) / "scenes" / "hertz_cube_haptic.json"));
-  const int steps = 200;
-  const PressedRun one = pressed_run(s, 1, steps);
-  const PressedRun a = pressed_run(s, 2, steps), b = pressed_run(s, 2, steps);
+// Two runs on two threads are bit-identical; one and two threads differ by the order of
+// the force sums (and of the update passes' sums over the coordinates) only: round-off.
+void expect_pressed_runs_agree(const test::Setup& s, int steps, double force) {
+  const PressedRun one = pressed_run(s, 1, steps, force);
+  const PressedRun a = pressed_run(s, 2, steps, force), b = pressed_run(s, 2, steps, force);
   EXPECT_TRUE(bit_identical(a.position, b.position));
   EXPECT_EQ(std::memcmp(a.indenter.data(), b.indenter.data(), sizeof(double) * 3), 0);
   EXPECT_EQ(std::memcmp(a.contact.data(), b.contact.data(), sizeof(double) * 3), 0);
-  // One and two threads differ by the order of the force sums only: round-off, grown over
-  // the run (printed for the record).
+  EXPECT_EQ(a.kinetic, b.kinetic);
+  EXPECT_EQ(a.position_sum, b.position_sum);
+  // Round-off, grown over the run (printed for the record).
   const double displacement = (one.position - s.model.rest_position).cwiseAbs().maxCoeff();
   const double position_diff = (one.position - a.position).cwiseAbs().maxCoeff() / displacement;
   const double contact_diff = (one.contact - a.contact).norm() / one.contact.norm();
-  std::printf("threads 1 vs 2 after %d steps: max |dx| / max displacement %.3g, |d contact force| / |F| %.3g\n",
-              steps, position_diff, contact_diff);
+  std::printf("%s: threads 1 vs 2 after %d steps: max |dx| / max displacement %.3g, |d contact force| / |F| %.3g\n",
+              s.scene.name.c_str(), steps, position_diff, contact_diff);
   EXPECT_LT(position_diff, 1e-9);
   EXPECT_LT(contact_diff, 1e-9);
+  EXPECT_NEAR(a.kinetic, one.kinetic, 1e-6 * one.kinetic);
+  EXPECT_NEAR(a.position_sum, one.position_sum, 1e-9 * std::abs(one.position_sum));
+  EXPECT_GT(one.kinetic, 0.0);
+}
+
+TEST(ParallelForces, PressedRunIsBitIdenticalForAGivenThreadCount) {
+  // The accurate haptic scene (symplectic Euler).
+  expect_pressed_runs_agree(
+      test::setup_from(load_scene(std::filesystem::path(PALPATE_SOURCE_DIR) / "scenes" / "hertz_cube_haptic.json")),
+      200, 120.0);
+}
+
+TEST(ParallelForces, Rk4PressedRunIsBitIdenticalForAGivenThreadCount) {
+  // The paper's cube (RK4: four update passes per step, split over the threads too).
+  expect_pressed_runs_agree(
+      test::setup_from(load_scene(std::filesystem::path(PALPATE_SOURCE_DIR) / "scenes" / "hertz_cube.json")), 100,
+      30.0);
 }
 
 TEST(ParallelForces, ThreadCountMayChangeBetweenSteps) {
