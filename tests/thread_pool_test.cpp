@@ -15,6 +15,7 @@
 #include <set>
 #include <thread>
 
+#include "core/health.h"
 #include "core/mls_forces.h"
 #include "core/solid.h"
 #include "core/state.h"
@@ -195,6 +196,7 @@ PressedRun pressed_run(const test::Setup& s, int threads, int steps, double forc
   State state = make_state(s.model, opt);
   EXPECT_EQ(state.work.threads.count(), threads);
   state.indenter_center.z() = s.model.touch_height;
+  reset_health(s.model, opt, state);  // the energy check counts the tool's travel from here
   state.force_command = press_down(force);
   for (int k = 0; k < steps; ++k) {
     const StepStatus status = step(s.model, opt, state);
@@ -239,7 +241,7 @@ TEST(ParallelForces, Rk4PressedRunIsBitIdenticalForAGivenThreadCount) {
   // The paper's cube (RK4: four update passes per step, split over the threads too).
   expect_pressed_runs_agree(
       test::setup_from(load_scene(std::filesystem::path(PALPATE_SOURCE_DIR) / "scenes" / "hertz_cube.json")), 100,
-      30.0);
+      120.0);
 }
 
 TEST(ParallelForces, ThreadCountMayChangeBetweenSteps) {
