@@ -120,10 +120,8 @@ bool richardson(const double h[3], const double d[3], double& extrapolated, doub
   return true;
 }
 
-namespace {
-
 // Per quantity k (a force's depth, or a depth's force), Richardson over the levels (h = 1 /
-// (per_edge - 1)): only where the three finest levels converge monotonically at a plausible
+// (per_edge - 1), or first_spacing for a family without per_edge): only where the three finest levels converge monotonically at a plausible
 // order and the next coarser triple agrees on it; contact makes the sequence oscillate
 // (nodes enter the contact ring by ring), and then the finest level stands, with the spread
 // of the three finest as uncertainty.
@@ -131,7 +129,7 @@ void extrapolate_levels(const std::vector<ReferenceLevel>& levels, const std::ve
                         std::vector<double>& extrapolated, std::vector<double>& uncertainty,
                         std::vector<double>& order) {
   const size_t L = levels.size();
-  auto h_of = [&](size_t k) { return 1.0 / (levels[k].per_edge - 1); };
+  auto h_of = [&](size_t k) { return levels[k].per_edge > 1 ? 1.0 / (levels[k].per_edge - 1) : levels[k].first_spacing; };
   for (size_t f = 0; f < value[0].size(); ++f) {
     auto extrapolate = [&](size_t first, double& v_star, double& p) {
       const double h[3] = {h_of(first), h_of(first + 1), h_of(first + 2)};
@@ -161,6 +159,14 @@ void extrapolate_levels(const std::vector<ReferenceLevel>& levels, const std::ve
     order.push_back(p);
   }
 }
+
+void extrapolate_indentation(Reference& ref) {
+  std::vector<std::vector<double>> per_level;
+  for (const ReferenceLevel& level : ref.levels) per_level.push_back(level.indentation);
+  extrapolate_levels(ref.levels, per_level, ref.indentation, ref.uncertainty, ref.order);
+}
+
+namespace {
 
 // The scene of one reference level: the scene's block as hex bricks of `formulation` on the
 // graded lattice of per_edge nodes whose first spacing is `first_spacing`, for a static solve.
@@ -305,9 +311,7 @@ Reference finite_cube_reference(const Scene& scene, const std::vector<double>& f
     }
     ref.levels.push_back(std::move(level));
   }
-  std::vector<std::vector<double>> per_level;
-  for (const ReferenceLevel& level : ref.levels) per_level.push_back(level.indentation);
-  extrapolate_levels(ref.levels, per_level, ref.indentation, ref.uncertainty, ref.order);
+  extrapolate_indentation(ref);
   return ref;
 }
 

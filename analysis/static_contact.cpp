@@ -29,50 +29,101 @@ bool has_linear_static_solve(const Model& model) {
 
 struct LinearStaticContact::Impl {
   using SparseMatrix = Eigen::SparseMatrix<double>;
-  const Model& model;
+  const Model* model = nullptr;  // the hex FEM model, when built from one (write_state needs it)
+  LinearBody body;
   std::vector<int> free_dof;   // 3n: index among the free DOFs, -1 for a fixed particle
   int free_count = 0;
   Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> cholesky;
 
-  // Candidates: free top-face nodes under the sphere, with their undeformed gaps h at d = 0.
-  std::vector<int> candidate;  // particle index
+  // Candidates (body.candidate): free surface nodes under the sphere, with their undeformed gaps h at d = 0.
+  const std::vector<int>& candidate = body.candidate;
   std::vector<double> gap0;    // h_i, m
   // Compliance columns C(:, k) restricted to the candidates' vertical DOFs; empty until needed.
   std::vector<std::vector<double>> column;
   int columns_computed = 0;
   std::vector<int> active;     // candidate indices; kept between solves as a warm start
 
-  explicit Impl(const Model& m) : model(m) {
+  explicit Impl(const Model& m) : model(&m) {
     if (!has_linear_static_solve(m))
       throw std::runtime_error("the exact quasi-static solve needs the linear hex_fem model");
-    const int n = m.particle_count;
+    body.rest_position = m.rest_position;
+    body.fixed = m.fixed;
+    body.indenter_radius = m.indenter_radius;
+    body.site_x = m.indenter_start[0];
+    body.site_y = m.indenter_start[1];
+    body.touch_height = m.touch_height;
+    hex_stiffness(m, body.stiffness_lower);
+    top_face_candidates(m, body.candidate);
+    if (body.candidate.empty()) throw std::runtime_error("no free top-face node lies under the indenter");
+    set_up();
+  }
+
+  explicit Impl(LinearBody b) : body(std::move(b)) {
+    const Eigen::Index n = body.rest_position.cols();
+    const double R = body.indenter_radius;
+    if (static_cast<Eigen::Index>(body.fixed.size()) != n)
+      throw std::invalid_argument("LinearBody: fixed has " + std::to_string(body.fixed.size()) + " entries for " +
+                                  std::to_string(n) + " nodes");
+    if (!(R > 0.0)) throw std::invalid_argument("LinearBody: the indenter radius must be positive");
+    if (body.candidate.empty()) throw std::invalid_argument("LinearBody: no contact candidate");
+    for (int i : body.candidate) {
+      if (i < 0 || i >= n || body.fixed[i])
+        throw std::invalid_argument("LinearBody: candidate " + std::to_string(i) + " is not a free node");
+      const double dx = body.rest_position(0, i) - body.site_x, dy = body.rest_position(1, i) - body.site_y;
+      if (dx * dx + dy * dy >= R * R)
+        throw std::invalid_argument("LinearBody: candidate " + std::to_string(i) + " is outside the sphere's footprint");
+    }
+    set_up();
+    for (size_t k = 0; k < gap0.size(); ++k)
+      if (gap0[k] < -1e-9 * R)
+        throw std::invalid_argument("LinearBody: candidate " + std::to_string(candidate[k]) +
+                                    " lies above the sphere at first touch (gap " + std::to_string(gap0[k]) + " m)");
+  }
+
+  void set_up() {
+    const Eigen::Index n = body.rest_position.cols();
     free_dof.assign(3 * static_cast<size_t>(n), -1);
-    for (int i = 0; i < n; ++i)
-      if (!m.fixed[i])
+    for (Eigen::Index i = 0; i < n; ++i)
+      if (!body.fixed[i])
         for (int c = 0; c < 3; ++c) free_dof[3 * i + c] = free_count++;
-    assemble_and_factorize();
-    find_candidates();
+    factorize();
+    const Points& X = body.rest_position;
+    const double R = body.indenter_radius;
+    for (int i : candidate) {
+      const double dx = X(0, i) - body.site_x, dy = X(1, i) - body.site_y;
+      // Sphere bottom at the node when the indenter touches the surface: touch_height - sqrt(R^2 - r^2).
+      gap0.push_back(body.touch_height - std::sqrt(R * R - dx * dx - dy * dy) - X(2, i));
+    }
     column.resize(candidate.size());
   }
 
-  void assemble_and_factorize() {
-    // Lower triangle of K over the free DOFs from the element matrices.
-    std::vector<Eigen::Triplet<double>> triplets;
+  // Lower triangle of K over all DOFs from the hex element matrices.
+  static void hex_stiffness(const Model& model, std::vector<Eigen::Triplet<double>>& triplets) {
     triplets.reserve(static_cast<size_t>(model.hex.element_count) * 300);
     for (int e = 0; e < model.hex.element_count; ++e) {
       const auto& nodes = model.hex.element_nodes[e];
       const ElementMatrix& K = model.hex.element_stiffness[model.hex.element_type[e]];
       for (int a = 0; a < 8; ++a)
         for (int c = 0; c < 3; ++c) {
-          const int row = free_dof[3 * nodes[a] + c];
-          if (row < 0) continue;
+          const int row = 3 * nodes[a] + c;
           for (int b = 0; b < 8; ++b)
             for (int d = 0; d < 3; ++d) {
-              const int col = free_dof[3 * nodes[b] + d];
-              if (col >= 0 && row >= col) triplets.emplace_back(row, col, K(3 * a + c, 3 * b + d));
+              const int col = 3 * nodes[b] + d;
+              if (row >= col) triplets.emplace_back(row, col, K(3 * a + c, 3 * b + d));
             }
         }
     }
+  }
+
+  // K over the free DOFs (the body's entries on fixed DOFs dropped), factorised.
+  void factorize() {
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(body.stiffness_lower.size());
+    for (const auto& t : body.stiffness_lower) {
+      const int row = free_dof[t.row()], col = free_dof[t.col()];
+      if (row >= 0 && col >= 0) triplets.emplace_back(std::max(row, col), std::min(row, col), t.value());
+    }
+    body.stiffness_lower = {};
     SparseMatrix K(free_count, free_count);
     K.setFromTriplets(triplets.begin(), triplets.end());
     triplets = {};
@@ -81,7 +132,8 @@ struct LinearStaticContact::Impl {
       throw std::runtime_error("the stiffness matrix is singular: the fixed faces do not hold the body");
   }
 
-  void find_candidates() {
+  // The hex model's candidates: free top-face nodes under the sphere.
+  static void top_face_candidates(const Model& model, std::vector<int>& candidate) {
     const Points& X = model.rest_position;
     const double top = X.row(2).maxCoeff();
     const double R = model.indenter_radius;
@@ -89,13 +141,8 @@ struct LinearStaticContact::Impl {
     for (int i = 0; i < model.particle_count; ++i) {
       if (model.fixed[i] || X(2, i) < top - tol) continue;
       const double dx = X(0, i) - model.indenter_start[0], dy = X(1, i) - model.indenter_start[1];
-      const double r2 = dx * dx + dy * dy;
-      if (r2 >= R * R) continue;
-      candidate.push_back(i);
-      // Sphere bottom at the node when the indenter touches the surface: touch_height - sqrt(R^2 - r^2).
-      gap0.push_back(model.touch_height - std::sqrt(R * R - r2) - X(2, i));
+      if (dx * dx + dy * dy < R * R) candidate.push_back(i);
     }
-    if (candidate.empty()) throw std::runtime_error("no free top-face node lies under the indenter");
   }
 
   // Solves K x = b for the unit vertical loads of the candidates in `need` (batched).
@@ -127,7 +174,7 @@ struct LinearStaticContact::Impl {
     std::vector<uint8_t> in_active(m, 0);
     Eigen::VectorXd p;
     double d = 0.0;
-    const double gap_tolerance = 1e-12 * model.indenter_radius;
+    const double gap_tolerance = 1e-12 * body.indenter_radius;
     const int max_iterations = 20 * m + 100;
     for (int it = 0; it < max_iterations; ++it) {
       out.iterations = it;
@@ -177,11 +224,15 @@ struct LinearStaticContact::Impl {
     out.indentation = d;
     out.contact_force = p.sum();
     out.active_count = static_cast<int>(active.size());
-    if (state) write_state(force, d, p, *state);
+    if (state) {
+      if (!model) throw std::logic_error("LinearStaticContact::solve: a body without a Model has no State to write");
+      write_state(force, d, p, *state);
+    }
     return out;
   }
 
   void write_state(double force, double d, const Eigen::VectorXd& p, State& state) {
+    const Model& model = *this->model;
     Eigen::VectorXd load = Eigen::VectorXd::Zero(free_count);
     for (size_t a = 0; a < active.size(); ++a) load[free_dof[3 * candidate[active[a]] + 2]] = -p[a];
     const Eigen::VectorXd u = cholesky.solve(load);
@@ -205,6 +256,7 @@ struct LinearStaticContact::Impl {
 };
 
 LinearStaticContact::LinearStaticContact(const Model& model) : impl_(std::make_unique<Impl>(model)) {}
+LinearStaticContact::LinearStaticContact(LinearBody body) : impl_(std::make_unique<Impl>(std::move(body))) {}
 LinearStaticContact::~LinearStaticContact() = default;
 StaticSolution LinearStaticContact::solve(double force, State* state) { return impl_->solve(force, state); }
 int LinearStaticContact::free_dofs() const { return impl_->free_count; }

@@ -23,6 +23,9 @@
 // and the free particles' residual force is below tolerance.
 #include <memory>
 #include <string>
+#include <vector>
+
+#include <Eigen/SparseCore>
 
 #include "core/model.h"
 #include "core/options.h"
@@ -40,12 +43,33 @@ struct StaticSolution {
   std::string message;          // why it did not converge
 };
 
+// A linear elastic body for the same solve, from any discretisation (the linear tetrahedra
+// of analysis/tet_reference.h): the lower triangle (row >= column) of its stiffness over all
+// 3n DOFs (3 i + c; entries on fixed nodes' DOFs are dropped, duplicates summed), the
+// rest positions, which nodes are fixed, the contact candidates (free surface nodes the
+// sphere may touch) and the sphere: radius, site (x, y) and the height of its centre when it
+// first touches a candidate (each candidate's gap h_i = touch_height - sqrt(R^2 - r_i^2) - z_i).
+struct LinearBody {
+  Points rest_position;
+  std::vector<uint8_t> fixed;
+  std::vector<Eigen::Triplet<double>> stiffness_lower;
+  std::vector<int> candidate;  // node indices, each free and within R of the site in (x, y)
+  double indenter_radius = 0.0;
+  double site_x = 0.0, site_y = 0.0;
+  double touch_height = 0.0;
+};
+
 // Linear FEM: the factorised stiffness and the compliance columns computed so far.
 class LinearStaticContact {
  public:
   // Assembles and factorises K; throws std::runtime_error when the model is not the
   // linear hex FEM or K is singular (too few fixed faces).
   explicit LinearStaticContact(const Model& model);
+  // The same for a body given by its stiffness (solve's `state` must then be null: there
+  // is no Model to write a State of). Throws std::runtime_error when K is singular, and
+  // std::invalid_argument when a candidate is fixed, outside the sphere's footprint or
+  // its gap is negative, or there is none.
+  explicit LinearStaticContact(LinearBody body);
   ~LinearStaticContact();
   LinearStaticContact(const LinearStaticContact&) = delete;
   LinearStaticContact& operator=(const LinearStaticContact&) = delete;

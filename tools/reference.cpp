@@ -1,6 +1,8 @@
 // palpate-reference: the converged finite-block reference of a scene (analysis/reference.h):
 // the linear hex FEM on graded lattices refined level by level, solved exactly and
-// quasi-statically, with Richardson extrapolation of the indentation at each force.
+// quasi-statically, with Richardson extrapolation of the indentation at each force; or, for
+// bodies of any shape, the same on linear tetrahedra of a family of meshes (--tet-meshes,
+// analysis/tet_reference.h).
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -12,6 +14,7 @@
 #include "cli/arguments.h"
 #include "core/hertz.h"
 #include "analysis/reference.h"
+#include "analysis/tet_reference.h"
 #include "core/scene.h"
 
 #include <spdlog/spdlog.h>
@@ -42,6 +45,11 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
                         intervals (default 0.6), geometric beyond; --levels are the
                         quarter's nodes per axis (choose W above the largest contact radius)
   --core-share S        the share of each axis's intervals inside the core (0 < S < 1)
+  --tet-meshes F1:H1,F2:H2,...
+                        the reference of a body of any shape instead (docs/physics.md §5,
+                        "A reference for any shape"): linear tetrahedra on these meshes of
+                        the scene's body (coarse to fine, at least three; H the element size
+                        at the site, m), the exact static solve on each, Richardson in H
   --set KEY=VALUE       override a scene field (repeatable)
   --out FILE            write the reference as JSON (what palpate-verify --reference reads)
   --json                print the reference as JSON on stdout
@@ -61,6 +69,7 @@ int main(int argc, char** argv) {
   bool json = false, quiet = false;
   std::string log_level = "warn";
   std::vector<double> site;
+  std::vector<TetMeshLevel> tet_meshes;
   try {
     for (cli::Arguments args(argc, argv); args.next();) {
       const std::string& arg = args.flag();
@@ -76,6 +85,17 @@ int main(int argc, char** argv) {
       else if (arg == "--core-share") {
         lattice.core_share = cli::positive_list(value(), "--core-share").at(0);
         if (!(lattice.core_share < 1)) throw std::invalid_argument("--core-share: a share below 1");
+      }
+      else if (arg == "--tet-meshes") {
+        std::stringstream list(value());
+        for (std::string item; std::getline(list, item, ',');) {
+          const size_t colon = item.rfind(':');
+          if (colon == std::string::npos || colon == 0)
+            throw std::invalid_argument("--tet-meshes: '" + item + "' is not FILE:H (H the element size at the site, m)");
+          const double h = cli::positive_list(item.substr(colon + 1), "--tet-meshes").at(0);
+          tet_meshes.push_back({item.substr(0, colon), h});
+        }
+        if (tet_meshes.size() < 3) throw std::invalid_argument("--tet-meshes: at least three meshes");
       }
       else if (arg == "--out") out_file = value();
       else if (arg == "--site") {
@@ -93,6 +113,8 @@ int main(int argc, char** argv) {
     if (scene_file.empty()) throw std::invalid_argument("--scene FILE is required");
     if (!depths.empty() && options.base_first_spacing > 0)
       throw std::invalid_argument("--first-spacing: not used with --depths (see --core-half-width)");
+    if (!tet_meshes.empty() && (!depths.empty() || levels_given || options.base_first_spacing > 0))
+      throw std::invalid_argument("--tet-meshes: not with --depths, --levels or --first-spacing");
     if (depths.empty() && lattice.core_half_width > 0)
       throw std::invalid_argument("--core-half-width: only with --depths");
     if (options.levels.size() < 3) throw std::invalid_argument("--levels: at least three levels");
@@ -109,7 +131,7 @@ int main(int argc, char** argv) {
     Scene scene = load_scene(scene_file, overrides);
     if (!site.empty())
       place_indenter_at_site(scene, site[0], site[1], "--site");
-    else
+    else if (tet_meshes.empty())
       check_site(scene, scene_file + ": /indenter/position");
     const double R = scene.indenter.radius;
     const double E_star = hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio);
@@ -119,7 +141,9 @@ int main(int argc, char** argv) {
     const auto progress = [&](const std::string& m) {
       if (!quiet) std::fprintf(stderr, "palpate-reference: %s\n", m.c_str());
     };
-    if (!depths.empty())
+    if (!tet_meshes.empty())
+      ref = tet_mesh_reference(scene, forces, tet_meshes, progress);
+    else if (!depths.empty())
       ref = large_strain_reference(scene, depths, levels_given ? options.levels : std::vector<int>{17, 21, 25, 29},
                                    progress, lattice);
     else
@@ -147,9 +171,16 @@ int main(int argc, char** argv) {
       }
       return 0;
     }
-    std::printf("\nFinite-block reference (linear hex FEM, graded lattices, Richardson): %s\n", ref.key.c_str());
+    if (tet_meshes.empty())
+      std::printf("\nFinite-block reference (linear hex FEM, graded lattices, Richardson): %s\n", ref.key.c_str());
+    else
+      std::printf("\nReference (linear tetrahedra, meshes refined at the site, Richardson): %s\n", ref.key.c_str());
     std::printf("%10s", "F [N]");
-    for (const auto& l : ref.levels) std::printf(" %9d^3", l.per_edge);
+    for (const auto& l : ref.levels)
+      if (l.per_edge > 0)
+        std::printf(" %9d^3", l.per_edge);
+      else
+        std::printf(" %9.2gmm", l.first_spacing * 1e3);
     std::printf(" %11s %10s %6s %10s\n", "d* [m]", "+- [m]", "p", "d_Hertz");
     for (size_t f = 0; f < ref.forces.size(); ++f) {
       std::printf("%10.3f", ref.forces[f]);
