@@ -120,9 +120,11 @@ bool richardson(const double h[3], const double d[3], double& extrapolated, doub
   return true;
 }
 
+namespace {
+
 // Per quantity k (a force's depth, or a depth's force), Richardson over the levels (h = 1 /
-// (per_edge - 1), or first_spacing for a family without per_edge): only where the three finest levels converge monotonically at a plausible
-// order and the next coarser triple agrees on it; contact makes the sequence oscillate
+// (per_edge - 1), or first_spacing for a family without per_edge): only where the three
+// finest levels converge monotonically at a plausible order and the next coarser triple agrees on it; contact makes the sequence oscillate
 // (nodes enter the contact ring by ring), and then the finest level stands, with the spread
 // of the three finest as uncertainty.
 void extrapolate_levels(const std::vector<ReferenceLevel>& levels, const std::vector<std::vector<double>>& value,
@@ -159,6 +161,8 @@ void extrapolate_levels(const std::vector<ReferenceLevel>& levels, const std::ve
     order.push_back(p);
   }
 }
+
+}  // namespace
 
 void extrapolate_indentation(Reference& ref) {
   std::vector<std::vector<double>> per_level;

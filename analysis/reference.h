@@ -114,17 +114,11 @@ std::vector<double> core_graded_axis(double focus, double end, int intervals, in
 bool richardson(const double h[3], const double d[3], double& extrapolated, double& order);
 
 
-// The converged value at each quantity (index f of every level's row value[k]) from the
-// levels' values: Richardson over the three finest in h (1 / (per_edge - 1), or first_spacing
-// when per_edge is 0) where they converge monotonically at an order in [0.5, 4] and, with four
-// or more levels, the next coarser triple agrees on the order within half of it (uncertainty
-// max(1.25 |v* - finest|, |v* - the coarser triple's v*|)); elsewhere the finest value, with the
+// Fills ref.indentation, uncertainty and order from its levels' indentation: Richardson over
+// the three finest levels in h (1 / (per_edge - 1), or first_spacing when per_edge is 0) where
+// they converge monotonically at an order in [0.5, 4] and, with four or more levels, the next
+// coarser triple agrees on the order within half of it; elsewhere the finest level, with the
 // spread of the three finest as its uncertainty and order 0.
-void extrapolate_levels(const std::vector<ReferenceLevel>& levels, const std::vector<std::vector<double>>& value,
-                        std::vector<double>& extrapolated, std::vector<double>& uncertainty,
-                        std::vector<double>& order);
-
-// Fills ref.indentation, uncertainty and order from its levels' indentation (extrapolate_levels).
 void extrapolate_indentation(Reference& ref);
 
 // JSON text of a reference (read back by reference_from_json, core/reference_file.h).

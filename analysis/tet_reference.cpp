@@ -61,21 +61,14 @@ LinearBody tet_body(const Scene& scene_in, const std::filesystem::path& file) {
   const int n = static_cast<int>(X.cols());
   LinearBody body;
   body.rest_position = X;
-  body.fixed = particles_on_faces(X, scene.fixed_faces);
-  for (const FixedRegion& region : scene.fixed_regions) fix_region(cloud, region, scene.source, body.fixed);
+  body.fixed = fixed_particles(scene, cloud);
 
   // Each tetrahedron: the last inclusion that contains it (its centroid; a group: its region), else the matrix.
   const MaterialSpec& material = scene.material;
   std::vector<int64_t> group_tag(material.inclusions.size(), -1);
-  for (size_t k = 0; k < material.inclusions.size(); ++k) {
-    if (material.inclusions[k].shape != InclusionShape::group) continue;
-    for (const NodeCloud::VolumeGroup& g : cloud.volume_groups)
-      if (g.name == material.inclusions[k].group) group_tag[k] = g.tag;
-    if (group_tag[k] < 0)
-      throw SceneError(scene.source, "/material/inclusions/" + std::to_string(k) + "/group",
-                       "the mesh " + scene.distribution.mesh_file.string() + " has no physical volume named '" +
-                           material.inclusions[k].group + "'");
-  }
+  for (size_t k = 0; k < material.inclusions.size(); ++k)
+    if (material.inclusions[k].shape == InclusionShape::group)
+      group_tag[k] = group_inclusion_tag(material, k, cloud, scene.source);
   const size_t T = cloud.tetrahedra.size();
   std::vector<double> lambda(T), mu(T);
   for (size_t t = 0; t < T; ++t) {

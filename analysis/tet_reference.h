@@ -49,8 +49,8 @@ struct TetMeshLevel {
 
 // The reference at `forces` on `levels` (at least 3, coarse to fine: spacing decreasing). Each
 // level's indentation is stored with its node count, its spacing as first_spacing (per_edge 0);
-// Richardson in h = spacing as finite_cube_reference's. The key is reference_key(scene) with
-// " tet" (the MLS scene's own reference file is found by that key only if it was written so).
+// Richardson in h = spacing as finite_cube_reference's. The key is reference_key(scene): a
+// reference of the same problem as the hex one would be, found by palpate-verify the same way.
 Reference tet_mesh_reference(const Scene& scene, const std::vector<double>& forces,
                              const std::vector<TetMeshLevel>& levels,
                              const std::function<void(const std::string&)>& progress = {});

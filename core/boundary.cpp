@@ -65,4 +65,10 @@ void fix_region(const NodeCloud& cloud, const FixedRegion& region, const std::st
     throw SceneError(source, region.field, "selects no particle of the body (check its position, size or tolerance)");
 }
 
+std::vector<uint8_t> fixed_particles(const Scene& scene, const NodeCloud& cloud) {
+  std::vector<uint8_t> fixed = particles_on_faces(cloud.positions, scene.fixed_faces);
+  for (const FixedRegion& region : scene.fixed_regions) fix_region(cloud, region, scene.source, fixed);
+  return fixed;
+}
+
 }  // namespace palpate

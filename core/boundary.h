@@ -23,4 +23,8 @@ std::vector<uint8_t> particles_on_faces(const Points& positions, uint32_t faces,
 void fix_region(const NodeCloud& cloud, const FixedRegion& region, const std::string& source,
                 std::vector<uint8_t>& fixed);
 
+// The particles the scene fixes: those on its fixed box faces (of the cloud's bounding box),
+// then those of each fixed region (fix_region), 1 for fixed. Throws as fix_region.
+std::vector<uint8_t> fixed_particles(const Scene& scene, const NodeCloud& cloud);
+
 }  // namespace palpate

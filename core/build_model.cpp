@@ -361,8 +361,7 @@ void set_boundary_and_indenter(Model& m, const Scene& scene, const NodeCloud& cl
   const int n = m.particle_count;
   const Points& X = m.rest_position;
   // Boundary conditions: the box faces, then the regions (core/boundary.h).
-  m.fixed = particles_on_faces(X, scene.fixed_faces);
-  for (const FixedRegion& region : scene.fixed_regions) fix_region(cloud, region, scene.source, m.fixed);
+  m.fixed = fixed_particles(scene, cloud);
   m.inverse_mass.resize(n);
   for (int i = 0; i < n; ++i) {
     m.inverse_mass[i] = m.fixed[i] ? 0.0 : 1.0 / m.mass[i];

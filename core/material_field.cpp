@@ -81,27 +81,29 @@ MaterialField material_field(const MaterialSpec& material, const Points& cell_mi
   return f;
 }
 
+int64_t group_inclusion_tag(const MaterialSpec& material, size_t k, const NodeCloud& cloud, const std::string& source) {
+  const InclusionSpec& inc = material.inclusions[k];
+  const std::string where = "/material/inclusions/" + std::to_string(k) + "/group";
+  if (cloud.tetrahedra.empty())
+    throw SceneError(source, where,
+                     "a group names a physical volume of a tetrahedral mesh; this body is not a mesh (use a sphere "
+                     "or a box)");
+  std::string names;
+  for (const NodeCloud::VolumeGroup& g : cloud.volume_groups) {
+    if (g.name == inc.group) return g.tag;
+    names += (names.empty() ? "'" : ", '") + g.name + "'";
+  }
+  throw SceneError(source, where,
+                   "the mesh has no physical volume group named '" + inc.group + "' (it has: " +
+                       (names.empty() ? std::string("none") : names) + ")");
+}
+
 void blend_group_inclusions(const MaterialSpec& material, const NodeCloud& cloud, const std::string& source,
                             MaterialField& field) {
   for (size_t k = 0; k < material.inclusions.size(); ++k) {
     const InclusionSpec& inc = material.inclusions[k];
     if (inc.shape != InclusionShape::group) continue;
-    const std::string where = "/material/inclusions/" + std::to_string(k) + "/group";
-    if (cloud.tetrahedra.empty())
-      throw SceneError(source, where,
-                       "a group names a physical volume of a tetrahedral mesh; this body is not a mesh (use a sphere "
-                       "or a box)");
-    int64_t tag = 0;
-    bool found = false;
-    std::string names;
-    for (const NodeCloud::VolumeGroup& g : cloud.volume_groups) {
-      if (g.name == inc.group) tag = g.tag, found = true;
-      names += (names.empty() ? "'" : ", '") + g.name + "'";
-    }
-    if (!found)
-      throw SceneError(source, where,
-                       "the mesh has no physical volume group named '" + inc.group + "' (it has: " +
-                           (names.empty() ? std::string("none") : names) + ")");
+    const int64_t tag = group_inclusion_tag(material, k, cloud, source);
     // f_i from the lumped tetrahedra (the quarter of each V_t its four vertices share).
     const int n = static_cast<int>(cloud.positions.cols());
     std::vector<double> in_group(n, 0.0), total(n, 0.0);

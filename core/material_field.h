@@ -50,6 +50,10 @@ MaterialField material_field(const MaterialSpec& material, const Points& cell_mi
 void blend_group_inclusions(const MaterialSpec& material, const NodeCloud& cloud, const std::string& source,
                             MaterialField& field);
 
+// The physical volume tag (in cloud.tetrahedron_region) of the group inclusion number k of
+// `material`, with the refusals above (a cloud without tetrahedra, an unknown name).
+int64_t group_inclusion_tag(const MaterialSpec& material, size_t k, const NodeCloud& cloud, const std::string& source);
+
 // The cell of each lattice node: along each axis from the midpoint to the previous node to
 // the midpoint to the next (the box's face at the ends), the cell whose volume is the
 // node's lattice volume (node_cloud.cpp). per_axis the lattice's nodes per axis, node
