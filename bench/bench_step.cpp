@@ -70,6 +70,36 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[k] : 0.5 * (v[k - 1] + v[k]);
 }
 
+// How full the blocked force loop's lanes are: the weighted pairs over 4 x the neighbour slots
+// (a block's four lists padded to its longest), and over 4 x the union of the four lists -- the
+// slots a loop would need that wrote each f_j once per block of four (one x_j broadcast, one
+// f_j update per distinct neighbour, every lane's weight for it, zero where it is not its
+// neighbour).
+struct LaneFill {
+  double slots = NAN, block_union = NAN;
+};
+LaneFill lane_fill(const Model& m) {
+  LaneFill fill;
+  if (!detail::uses_blocked_loops(m)) return fill;
+  const double pairs = m.neighbor_offset.back();
+  int64_t union_size = 0;
+  std::vector<int> neighbours;
+  for (size_t b = 0; b < m.blocks.size(); ++b) {
+    neighbours.clear();
+    for (int l = 0; l < Model::block_width; ++l) {
+      const int i = Model::block_width * static_cast<int>(b) + l;
+      if (i >= m.particle_count) break;
+      neighbours.insert(neighbours.end(), m.neighbor_index.begin() + m.neighbor_offset[i],
+                        m.neighbor_index.begin() + m.neighbor_offset[i + 1]);
+    }
+    std::sort(neighbours.begin(), neighbours.end());
+    union_size += std::unique(neighbours.begin(), neighbours.end()) - neighbours.begin();
+  }
+  fill.slots = pairs / (Model::block_width * static_cast<double>(m.block_slots.size()));
+  fill.block_union = pairs / (Model::block_width * static_cast<double>(union_size));
+  return fill;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -198,7 +228,7 @@ int main(int argc, char** argv) {
     // The force evaluation is timed warm (after an untimed one), as in the stages of a step.
     auto evaluate_forces = [&model, &start_position, &w] { elastic_forces(model, start_position, w.f, w.force_threads); };
     ops[force_eval] = {evaluate_forces, evaluate_forces, repeats, {}};
-    auto pair_loop_alone = [&model, &start_position, &w] { (void)detail::pair_loop_floor(model, start_position, w.f); };
+    auto pair_loop_alone = [&model, &start_position, &w] { (void)detail::pair_loop_floor(model, start_position, w.f, w.force_threads); };
     ops[pair_floor] = {pair_loop_alone, pair_loop_alone, floor_timed && c == 1 ? repeats : 0, {}};
     // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
     auto apply_tangent = [&model, &start, &w] { elastic_force_differential(model, w.linearized, start.saved().velocity, w.df); };
@@ -315,6 +345,9 @@ int main(int argc, char** argv) {
   j["pair_loop_floor_ns_per_pair"] = floor_timed && nnz > 0 ? nlohmann::json(floor_ms * 1e6 / nnz) : nlohmann::json(nullptr);
   j["force_eval_ceiling_fraction_of_peak"] =
       floor_timed && peak.double_gflops > 0 ? nlohmann::json(floor_ceiling) : nlohmann::json(nullptr);
+  const LaneFill fill = lane_fill(model);
+  j["slot_fill"] = std::isnan(fill.slots) ? nlohmann::json(nullptr) : nlohmann::json(fill.slots);
+  j["block_union_fill"] = std::isnan(fill.block_union) ? nlohmann::json(nullptr) : nlohmann::json(fill.block_union);
   j["force_differential_ms"] = tangent_ms;
   j["rk4_step_ms"] = rk4_ms;
   j["rk4_step_contacts"] = rk4_contacts;
@@ -392,6 +425,10 @@ int main(int argc, char** argv) {
                   "  %-34s %10s      force evaluation's flops would reach %.0f %% of the double peak\n",
                   "  its pair loop alone (P = F)", floor_ms, floor_ms * 1e6 / nnz, 100 * floor_ms / force_eval_ms, "",
                   "", 100 * floor_ceiling);
+    if (!std::isnan(fill.slots))
+      std::printf("  %-34s %10.0f %%   of their lanes hold a pair (a loop writing each f_j once per block\n"
+                  "  %-34s %10s      would fill %.0f %%: the union of the block's four lists)\n",
+                  "  its neighbour slots", 100 * fill.slots, "", "", 100 * fill.block_union);
     std::printf("  %-34s %10.4f ms\n", "mls_force_differential (K dx)", tangent_ms);
     std::printf("  %-34s %10.4f ms   (%d contacts)\n", "RK4 step", rk4_ms, rk4_contacts);
     std::printf("  %-34s %10.4f ms\n", "  4 force evaluations", 4 * force_eval_ms);

@@ -319,22 +319,99 @@ struct Mat3Lanes {
   const Lanes& operator()(int r, int c) const { return m[r + 3 * c]; }
 };
 
-// Component c of the 3-vectors of particles i_0 ... i_3 (column-major 3 x n data).
-PALPATE_INLINE Lanes gather(const double* x, const int (&i)[kLanes], int c) {
-  const double *x0 = x + 3 * static_cast<ptrdiff_t>(i[0]), *x1 = x + 3 * static_cast<ptrdiff_t>(i[1]),
-               *x2 = x + 3 * static_cast<ptrdiff_t>(i[2]), *x3 = x + 3 * static_cast<ptrdiff_t>(i[3]);
-  return Lanes{x0[c], x1[c], x2[c], x3[c]};
+// The blocked loops read positions (x, or dx for a differential) and write forces in one
+// of two layouts, their template parameter Layout:
+// - Rows: padded rows, particle i's x, y, z at rows[4 i ... 4 i + 2] and rows[4 i + 3] = 0,
+//   the buffer 32-byte aligned: one 256-bit load or store per particle and a 4 x 4
+//   transpose instead of three scalar accesses per lane (4-12 % off the single-thread
+//   loops, docs/verification.md); to_rows / from_rows convert at the loops' edges;
+// - Columns: the 3 x n column-major Points themselves (the threaded loops: on two threads
+//   the rows' conversions cost more than they save, docs/verification.md).
+// gather(x, i, c): c[r] lane l = entry r of particle i_l. subtract(f, i, g, lanes): f_{i_l}
+// -= g_l for the first `lanes` lanes, one particle after the other (two lanes may name the
+// same particle); each component gets the same subtractions in the same order in both
+// layouts, so their forces are bit-identical.
+constexpr int kRow = 4;
+
+struct Rows {
+  PALPATE_INLINE static void gather(const double* __restrict rows, const int (&i)[kLanes], Lanes (&c)[3]) {
+#if defined(__AVX__)
+    const __m256d r0 = _mm256_load_pd(rows + kRow * static_cast<ptrdiff_t>(i[0])),
+                  r1 = _mm256_load_pd(rows + kRow * static_cast<ptrdiff_t>(i[1])),
+                  r2 = _mm256_load_pd(rows + kRow * static_cast<ptrdiff_t>(i[2])),
+                  r3 = _mm256_load_pd(rows + kRow * static_cast<ptrdiff_t>(i[3]));
+    const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1), t2 = _mm256_unpacklo_pd(r2, r3),
+                  t3 = _mm256_unpackhi_pd(r2, r3);
+    c[0] = _mm256_permute2f128_pd(t0, t2, 0x20);
+    c[1] = _mm256_permute2f128_pd(t1, t3, 0x20);
+    c[2] = _mm256_permute2f128_pd(t0, t2, 0x31);
+#else
+    const double *x0 = rows + kRow * static_cast<ptrdiff_t>(i[0]), *x1 = rows + kRow * static_cast<ptrdiff_t>(i[1]),
+                 *x2 = rows + kRow * static_cast<ptrdiff_t>(i[2]), *x3 = rows + kRow * static_cast<ptrdiff_t>(i[3]);
+    PALPATE_UNROLL
+    for (int r = 0; r < 3; ++r) c[r] = Lanes{x0[r], x1[r], x2[r], x3[r]};
+#endif
+  }
+  PALPATE_INLINE static void subtract(double* __restrict rows, const int (&i)[kLanes], const Lanes (&g)[3],
+                                      int lanes = kLanes) {
+#if defined(__AVX__)
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d t0 = _mm256_unpacklo_pd(g[0], g[1]), t1 = _mm256_unpackhi_pd(g[0], g[1]),
+                  t2 = _mm256_unpacklo_pd(g[2], zero), t3 = _mm256_unpackhi_pd(g[2], zero);
+    const __m256d v[kLanes] = {_mm256_permute2f128_pd(t0, t2, 0x20), _mm256_permute2f128_pd(t1, t3, 0x20),
+                               _mm256_permute2f128_pd(t0, t2, 0x31), _mm256_permute2f128_pd(t1, t3, 0x31)};
+    PALPATE_UNROLL
+    for (int l = 0; l < lanes; ++l) {
+      double* p = rows + kRow * static_cast<ptrdiff_t>(i[l]);
+      _mm256_store_pd(p, _mm256_sub_pd(_mm256_load_pd(p), v[l]));
+    }
+#else
+    PALPATE_UNROLL
+    for (int l = 0; l < lanes; ++l) {
+      double* p = rows + kRow * static_cast<ptrdiff_t>(i[l]);
+      p[0] -= g[0][l];
+      p[1] -= g[1][l];
+      p[2] -= g[2][l];
+    }
+#endif
+  }
+};
+
+struct Columns {
+  PALPATE_INLINE static void gather(const double* __restrict x, const int (&i)[kLanes], Lanes (&c)[3]) {
+    const double *x0 = x + 3 * static_cast<ptrdiff_t>(i[0]), *x1 = x + 3 * static_cast<ptrdiff_t>(i[1]),
+                 *x2 = x + 3 * static_cast<ptrdiff_t>(i[2]), *x3 = x + 3 * static_cast<ptrdiff_t>(i[3]);
+    PALPATE_UNROLL
+    for (int r = 0; r < 3; ++r) c[r] = Lanes{x0[r], x1[r], x2[r], x3[r]};
+  }
+  PALPATE_INLINE static void subtract(double* __restrict f, const int (&i)[kLanes], const Lanes (&g)[3],
+                                      int lanes = kLanes) {
+    PALPATE_UNROLL
+    for (int l = 0; l < lanes; ++l) {
+      double* fi = f + 3 * static_cast<ptrdiff_t>(i[l]);
+      fi[0] -= g[0][l];
+      fi[1] -= g[1][l];
+      fi[2] -= g[2][l];
+    }
+  }
+};
+
+// rows (n padded rows) = x (3 x n, column-major).
+void to_rows(const double* __restrict x, int n, double* __restrict rows) {
+  for (int i = 0; i < n; ++i) {
+    rows[kRow * i] = x[3 * i];
+    rows[kRow * i + 1] = x[3 * i + 1];
+    rows[kRow * i + 2] = x[3 * i + 2];
+    rows[kRow * i + 3] = 0.0;
+  }
 }
 
-// f_{i_l} -= g_l for the first `lanes` lanes, one particle after the other (two lanes
-// may name the same particle).
-PALPATE_INLINE void subtract_lanes(double* f, const int (&i)[kLanes], const Lanes (&g)[3], int lanes = kLanes) {
-  PALPATE_UNROLL
-  for (int l = 0; l < lanes; ++l) {
-    double* fi = f + 3 * static_cast<ptrdiff_t>(i[l]);
-    fi[0] -= g[0][l];
-    fi[1] -= g[1][l];
-    fi[2] -= g[2][l];
+// f (3 x n, column-major) = rows (n padded rows).
+void from_rows(const double* __restrict rows, int n, double* __restrict f) {
+  for (int i = 0; i < n; ++i) {
+    f[3 * i] = rows[kRow * i];
+    f[3 * i + 1] = rows[kRow * i + 1];
+    f[3 * i + 2] = rows[kRow * i + 2];
   }
 }
 
@@ -361,12 +438,14 @@ struct HourglassSums {
 
 // Adds sum_j (x_j - x_i) d_j^T over the block's slots to F (A-9; also dF from dx); with
 // hourglass control, also the block's HourglassSums, from its slots hg (parallel to slot).
-template <bool hourglass = false>
+template <class Layout, bool hourglass = false>
 PALPATE_INLINE void add_gradient(const Slot* slot, const Slot* end, const double* __restrict x, const int (&i)[kLanes],
                                  Mat3Lanes& F, const HourglassSlot* hg = nullptr, HourglassSums* sums = nullptr) {
-  const Lanes xi[3] = {gather(x, i, 0), gather(x, i, 1), gather(x, i, 2)};
+  Lanes xi[3], xj[3];
+  Layout::gather(x, i, xi);
   for (; slot != end; ++slot) {
     const Lanes d0 = load(slot->d[0]), d1 = load(slot->d[1]), d2 = load(slot->d[2]);
+    Layout::gather(x, slot->j, xj);
     Lanes e0, e1, e2, k;
     if constexpr (hourglass) {
       e0 = load(hg->e[0]), e1 = load(hg->e[1]), e2 = load(hg->e[2]), k = load(hg->k);
@@ -374,7 +453,7 @@ PALPATE_INLINE void add_gradient(const Slot* slot, const Slot* end, const double
     }
     PALPATE_UNROLL
     for (int r = 0; r < 3; ++r) {
-      const Lanes x_ij = gather(x, slot->j, r) - xi[r];
+      const Lanes x_ij = xj[r] - xi[r];
       F(r, 0) += x_ij * d0;
       F(r, 1) += x_ij * d1;
       F(r, 2) += x_ij * d2;
@@ -423,27 +502,25 @@ PALPATE_INLINE void stress_times_weight(const Mat3Lanes& T, const double (&d)[3]
 // neighbour and f_i -= T d_i on the particle itself. Padding slots have d = 0 and
 // add nothing; padding lanes (i >= n) are not written. With hourglass control (T then
 // v_i P_i - G_i) also the direct forces (1.9a): f_j -= k_ij x_ij - F e_ij, f_i += s - F e_i.
-template <bool hourglass = false>
+template <class Layout, bool hourglass = false>
 PALPATE_INLINE void scatter_forces(const Block& block, const Slot* slot, const Slot* end, const Mat3Lanes& T,
                                    const int (&i)[kLanes], int lanes, double* __restrict f,
                                    const HourglassScatter& h = {}) {
   Lanes g[3];
-  [[maybe_unused]] Lanes xi[3];
+  [[maybe_unused]] Lanes xi[3], xj[3];
   [[maybe_unused]] const HourglassSlot* hg = h.slot;
-  if constexpr (hourglass) {
-    PALPATE_UNROLL
-    for (int r = 0; r < 3; ++r) xi[r] = gather(h.x, i, r);
-  }
+  if constexpr (hourglass) Layout::gather(h.x, i, xi);
   for (; slot != end; ++slot) {
     stress_times_weight(T, slot->d, g);
     if constexpr (hourglass) {
       const Mat3Lanes& F = *h.F;
       const Lanes e0 = load(hg->e[0]), e1 = load(hg->e[1]), e2 = load(hg->e[2]), k = load(hg->k);
       ++hg;
+      Layout::gather(h.x, slot->j, xj);
       PALPATE_UNROLL
-      for (int r = 0; r < 3; ++r) g[r] += k * (gather(h.x, slot->j, r) - xi[r]) - (F(r, 0) * e0 + F(r, 1) * e1 + F(r, 2) * e2);
+      for (int r = 0; r < 3; ++r) g[r] += k * (xj[r] - xi[r]) - (F(r, 0) * e0 + F(r, 1) * e1 + F(r, 2) * e2);
     }
-    subtract_lanes(f, slot->j, g);
+    Layout::subtract(f, slot->j, g);
   }
   stress_times_weight(T, block.self_weight, g);
   if constexpr (hourglass) {
@@ -452,7 +529,7 @@ PALPATE_INLINE void scatter_forces(const Block& block, const Slot* slot, const S
     PALPATE_UNROLL
     for (int r = 0; r < 3; ++r) g[r] -= h.sums->s[r] - (F(r, 0) * e0 + F(r, 1) * e1 + F(r, 2) * e2);
   }
-  subtract_lanes(f, i, g, lanes);
+  Layout::subtract(f, i, g, lanes);
 }
 
 // C += the columns of A and B crossed pairwise: column c of C gains A_a x B_b, (a, b) =
@@ -997,7 +1074,7 @@ PALPATE_INLINE void weighted_linear_differential(const Model& m, const Mat3Lanes
 // The force loop over G blocks at a time: F of each, their stresses v_i P_i, the
 // forces, with hourglass control's terms (1.9a) when hourglass. G = 2 for the
 // corotational law (its polar iterations interleave).
-template <bool volume_term, bool hourglass, int G>
+template <class Layout, bool volume_term, bool hourglass, int G>
 PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const double* __restrict x,
                                               double* __restrict f) {
   const int n = m.particle_count;
@@ -1011,7 +1088,7 @@ PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const doub
     block_particles(b0 + g, n, i[g]);
     PALPATE_UNROLL
     for (int k = 0; k < 9; ++k) F[g].m[k] = load(block.rest_correction[k]);  // F_i = C_i + sum_j (x_j - x_i) d_j^T
-    add_gradient<hourglass>(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i[g],
+    add_gradient<Layout, hourglass>(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i[g],
                             F[g], hourglass ? m.block_hourglass_slots.data() + block.slot_begin : nullptr, &sums[g]);
     v[g] = load(block.volume);
     lambda[g] = load(block.lame_lambda);
@@ -1038,19 +1115,19 @@ PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const doub
       subtract_hourglass_stress(m.block_hourglass[b0 + g], F[g], sums[g], vP[g]);
       h = {m.block_hourglass_slots.data() + block.slot_begin, &m.block_hourglass[b0 + g], &F[g], x, &sums[g]};
     }
-    scatter_forces<hourglass>(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end,
+    scatter_forces<Layout, hourglass>(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end,
                               vP[g], i[g], std::min(kLanes, n - kLanes * (b0 + g)), f, h);
   }
 }
 
 // Blocks [b_begin, b_end) (b_begin even: the corotational pairs are those of the whole loop).
-template <bool volume_term, bool hourglass>
+template <class Layout, bool volume_term, bool hourglass>
 void internal_forces_blocked(const Model& m, int b_begin, int b_end, const double* __restrict x,
                              double* __restrict f) {
   int b = b_begin;
   if (m.law == MaterialLaw::corotational)
-    for (; b + 2 <= b_end; b += 2) internal_forces_of_blocks<volume_term, hourglass, 2>(m, b, x, f);
-  for (; b < b_end; ++b) internal_forces_of_blocks<volume_term, hourglass, 1>(m, b, x, f);
+    for (; b + 2 <= b_end; b += 2) internal_forces_of_blocks<Layout, volume_term, hourglass, 2>(m, b, x, f);
+  for (; b < b_end; ++b) internal_forces_of_blocks<Layout, volume_term, hourglass, 1>(m, b, x, f);
 }
 
 // The force differentials df_q = (df/dx) dx_q for K directions in one sweep over blocks
@@ -1058,7 +1135,7 @@ void internal_forces_blocked(const Model& m, int b_begin, int b_end, const doubl
 // gathered once, the K gradients dF and scatters over the same slots, the laws' per-lane
 // work shared where it can be (the corotational rotation's linear system). Hourglass
 // control's energy is quadratic: its terms (1.9a) are those of the forces with (dx, dF).
-template <bool volume_term, bool hourglass, int K>
+template <class Layout, bool volume_term, bool hourglass, int K>
 void force_differentials_blocked(const Model& m, int b_begin, int b_end, const double* tangent_F,
                                  const double* tangent_S_or_R, const double* const* dx, double* const* df) {
   const int n = m.particle_count;
@@ -1072,7 +1149,7 @@ void force_differentials_blocked(const Model& m, int b_begin, int b_end, const d
     Mat3Lanes dF[K] = {};
     [[maybe_unused]] HourglassSums sums[K];
     PALPATE_UNROLL
-    for (int q = 0; q < K; ++q) add_gradient<hourglass>(begin, end, dx[q], i, dF[q], hg, &sums[q]);
+    for (int q = 0; q < K; ++q) add_gradient<Layout, hourglass>(begin, end, dx[q], i, dF[q], hg, &sums[q]);
     Mat3Lanes F, S, vdP[K];
     gather_matrices(tangent_F, i, F);
     gather_matrices(tangent_S_or_R, i, S);
@@ -1097,7 +1174,7 @@ void force_differentials_blocked(const Model& m, int b_begin, int b_end, const d
         subtract_hourglass_stress(m.block_hourglass[b], dF[q], sums[q], vdP[q]);
         h = {hg, &m.block_hourglass[b], &dF[q], dx[q], &sums[q]};
       }
-      scatter_forces<hourglass>(block, begin, end, vdP[q], i, lanes, df[q], h);
+      scatter_forces<Layout, hourglass>(block, begin, end, vdP[q], i, lanes, df[q], h);
     }
   }
 }
@@ -1140,7 +1217,7 @@ void count_polar_iterations(const Model& m, const double* x, double& schulz_iter
     block_particles(b, n, i);
     PALPATE_UNROLL
     for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
-    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i, F);
+    add_gradient<Columns>(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i, F);
     return std::min(kLanes, n - kLanes * b);
   };
   auto count = [&](auto& F, auto& R, int lanes) {
@@ -1189,29 +1266,43 @@ void split_blocks(const Model& m, int T, int* bounds) {
   bounds[T] = blocks;
 }
 
-// Runs loop(b_begin, b_end, out) -- a blocked loop that adds the forces of blocks
-// [b_begin, b_end) into out -- on the pool's threads over split_blocks' ranges, thread 0
-// into f, thread t > 0 into its own zeroed buffer; then adds the buffers into f in the
-// order t = 1, 2, ..., each thread over its share of the coordinates.
+// One thread: x (3 x n) to padded rows in the scratch, loop(0, blocks, x_rows, f_rows) -- a
+// blocked loop on Rows that adds the forces of the blocks into f_rows (zeroed first) --
+// and f (3 x n) from f_rows.
 template <class Loop>
-void scatter_in_parallel(const Model& m, Points& f, WorkerThreads& threads, const Loop& loop) {
+void loop_on_rows(const Model& m, WorkerThreads& scratch, const double* x, double* f, const Loop& loop) {
+  const int n = m.particle_count;
+  const size_t stride = kRow * static_cast<size_t>(n);
+  double* x_rows = scratch.row_buffers(2, n);
+  double* f_rows = x_rows + stride;
+  to_rows(x, n, x_rows);
+  std::fill(f_rows, f_rows + stride, 0.0);
+  loop(0, static_cast<int>(m.blocks.size()), x_rows, f_rows);
+  from_rows(f_rows, n, f);
+}
+
+// Runs loop(b_begin, b_end, out) -- a blocked loop on Columns that adds the forces of blocks
+// [b_begin, b_end) into out (3 x n) -- on the pool's threads over split_blocks' ranges,
+// thread 0 into f, thread t > 0 into its own zeroed buffer of the scratch; then adds the
+// buffers into f in the order t = 1, 2, ..., each thread over its share of the coordinates.
+template <class Loop>
+void scatter_in_parallel(const Model& m, double* f, WorkerThreads& threads, const Loop& loop) {
   const int T = threads.count(), n = m.particle_count;
-  for (Points& p : threads.partial)
-    if (p.cols() != n) p.resize(3, n);  // a model other than the State's (allocates once)
+  const size_t stride = kRow * static_cast<size_t>(n);  // the scratch's buffers (3 n used)
+  double* partial = threads.row_buffers(T - 1, n);
   int bounds[kMaxThreads + 1];
   split_blocks(m, T, bounds);
   threads.pool->run([&](int t) {
-    double* out = t == 0 ? f.data() : threads.partial[static_cast<size_t>(t - 1)].data();
+    double* out = t == 0 ? f : partial + (t - 1) * stride;
     std::fill(out, out + 3 * static_cast<ptrdiff_t>(n), 0.0);
     loop(bounds[t], bounds[t + 1], out);
   });
   const int64_t coordinates = 3 * int64_t{n};
   threads.pool->run([&](int t) {
-    double* out = f.data();
     const int64_t k_begin = coordinates * t / T, k_end = coordinates * (t + 1) / T;
     for (int u = 1; u < T; ++u) {
-      const double* in = threads.partial[static_cast<size_t>(u - 1)].data();
-      for (int64_t k = k_begin; k < k_end; ++k) out[k] += in[k];
+      const double* in = partial + (u - 1) * stride;
+      for (int64_t k = k_begin; k < k_end; ++k) f[k] += in[k];
     }
   });
 }
@@ -1253,24 +1344,25 @@ int detail::schulz_rotation_blocked(const Mat3 (&F)[Model::block_width], Mat3 (&
   return iterations;
 }
 
-double detail::pair_loop_floor(const Model& m, const Points& x, Points& f) {
+double detail::pair_loop_floor(const Model& m, const Points& x, Points& f, WorkerThreads& scratch) {
   assert(use_blocks(m) && "pair_loop_floor needs the blocked layout");
-  f.setZero();
-  const int n = m.particle_count, blocks = static_cast<int>(m.blocks.size());
-  for (int b = 0; b < blocks; ++b) {
-    const Block& block = m.blocks[b];
-    int i[kLanes];
-    block_particles(b, n, i);
-    Mat3Lanes F, vP;
-    PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
-    add_gradient(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x.data(), i, F);
-    const Lanes v = load(block.volume);
-    PALPATE_UNROLL
-    for (int k = 0; k < 9; ++k) vP.m[k] = v * F.m[k];
-    scatter_forces(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, vP, i,
-                   std::min(kLanes, n - kLanes * b), f.data());
-  }
+  const int n = m.particle_count;
+  loop_on_rows(m, scratch, x.data(), f.data(), [&](int b_begin, int b_end, const double* x_rows, double* f_rows) {
+    for (int b = b_begin; b < b_end; ++b) {
+      const Block& block = m.blocks[b];
+      int i[kLanes];
+      block_particles(b, n, i);
+      Mat3Lanes F, vP;
+      PALPATE_UNROLL
+      for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
+      add_gradient<Rows>(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x_rows, i, F);
+      const Lanes v = load(block.volume);
+      PALPATE_UNROLL
+      for (int k = 0; k < 9; ++k) vP.m[k] = v * F.m[k];
+      scatter_forces<Rows>(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, vP, i,
+                           std::min(kLanes, n - kLanes * b), f_rows);
+    }
+  });
   return m.neighbor_offset.back() * 39.0 + n * (18.0 + 9.0);
 }
 
@@ -1292,20 +1384,23 @@ double particle_first_piola_stress(const Model& model, const Mat3& F, int i, Mat
 }
 
 void mls_internal_forces(const Model& m, const Points& x, Points& f) {
-  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
-  f.setZero();
-  const int blocks = static_cast<int>(m.blocks.size());
-  if (!use_blocks(m)) return internal_forces_per_particle(m, x.data(), f.data());
-  with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
-    internal_forces_blocked<volume_term, hourglass>(m, 0, blocks, x.data(), f.data());
-  });
+  WorkerThreads scratch;  // allocates the loop's rows: the stepping code passes its own
+  mls_internal_forces(m, x, f, scratch);
 }
 
 void mls_internal_forces(const Model& m, const Points& x, Points& f, WorkerThreads& threads) {
-  if (threads.count() == 1 || !use_blocks(m)) return mls_internal_forces(m, x, f);
-  scatter_in_parallel(m, f, threads, [&](int b_begin, int b_end, double* out) {
-    with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
-      internal_forces_blocked<volume_term, hourglass>(m, b_begin, b_end, x.data(), out);
+  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
+  if (!use_blocks(m)) {
+    f.setZero();
+    return internal_forces_per_particle(m, x.data(), f.data());
+  }
+  with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
+    if (threads.count() == 1)
+      return loop_on_rows(m, threads, x.data(), f.data(), [&](int b_begin, int b_end, const double* x_rows, double* out) {
+        internal_forces_blocked<Rows, volume_term, hourglass>(m, b_begin, b_end, x_rows, out);
+      });
+    scatter_in_parallel(m, f.data(), threads, [&](int b_begin, int b_end, double* out) {
+      internal_forces_blocked<Columns, volume_term, hourglass>(m, b_begin, b_end, x.data(), out);
     });
   });
 }
@@ -1360,58 +1455,67 @@ void linearize_particles(const Model& m, const Points& x, int i_begin, int i_end
 }  // namespace
 
 void mls_force_differential(const Model& m, const std::vector<double>& tangent_F,
-                        const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df) {
-  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
-  df.setZero();
-  if (!use_blocks(m)) return force_differential_per_particle(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
-  const double* in[1] = {dx.data()};
-  double* out[1] = {df.data()};
-  const int blocks = static_cast<int>(m.blocks.size());
-  with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
-    force_differentials_blocked<volume_term, hourglass, 1>(m, 0, blocks, tangent_F.data(), tangent_S_or_R.data(), in, out);
-  });
+                            const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df) {
+  WorkerThreads scratch;  // allocates the loop's rows: the stepping code passes its own
+  mls_force_differential(m, tangent_F, tangent_S_or_R, dx, df, scratch);
 }
 
 void mls_force_differential(const Model& m, const std::vector<double>& tangent_F,
                             const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df,
                             WorkerThreads& threads) {
-  if (threads.count() == 1 || !use_blocks(m)) return mls_force_differential(m, tangent_F, tangent_S_or_R, dx, df);
-  scatter_in_parallel(m, df, threads, [&](int b_begin, int b_end, double* out) {
-    const double* in[1] = {dx.data()};
-    double* outs[1] = {out};
-    with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
-      force_differentials_blocked<volume_term, hourglass, 1>(m, b_begin, b_end, tangent_F.data(), tangent_S_or_R.data(),
-                                                             in, outs);
+  assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
+  if (!use_blocks(m)) {
+    df.setZero();
+    return force_differential_per_particle(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
+  }
+  const double *F = tangent_F.data(), *S = tangent_S_or_R.data();
+  with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
+    if (threads.count() == 1)
+      return loop_on_rows(m, threads, dx.data(), df.data(), [&](int b_begin, int b_end, const double* dx_rows, double* out) {
+        const double* in[1] = {dx_rows};
+        double* outs[1] = {out};
+        force_differentials_blocked<Rows, volume_term, hourglass, 1>(m, b_begin, b_end, F, S, in, outs);
+      });
+    scatter_in_parallel(m, df.data(), threads, [&](int b_begin, int b_end, double* out) {
+      const double* in[1] = {dx.data()};
+      double* outs[1] = {out};
+      force_differentials_blocked<Columns, volume_term, hourglass, 1>(m, b_begin, b_end, F, S, in, outs);
     });
   });
 }
 
 void mls_force_differentials(const Model& m, const std::vector<double>& tangent_F,
                              const std::vector<double>& tangent_S_or_R, int count, const Points* const* dx,
-                             Points* const* df) {
+                             Points* const* df, WorkerThreads& scratch) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   assert(count >= 0 && count <= kMaxDifferentials);
   if (count == 0) return;
   if (!use_blocks(m)) {  // the per-particle reference loop: one product after the other
-    for (int q = 0; q < count; ++q) mls_force_differential(m, tangent_F, tangent_S_or_R, *dx[q], *df[q]);
+    for (int q = 0; q < count; ++q) mls_force_differential(m, tangent_F, tangent_S_or_R, *dx[q], *df[q], scratch);
     return;
   }
+  const int n = m.particle_count;
+  const size_t stride = kRow * static_cast<size_t>(n);
+  double* rows = scratch.row_buffers(2 * count, n);  // the directions' rows, then their forces'
   const double* in[kMaxDifferentials];
   double* out[kMaxDifferentials];
   for (int q = 0; q < count; ++q) {
-    df[q]->setZero();
-    in[q] = dx[q]->data();
-    out[q] = df[q]->data();
+    double* in_rows = rows + q * stride;
+    to_rows(dx[q]->data(), n, in_rows);
+    in[q] = in_rows;
+    out[q] = rows + (count + q) * stride;
+    std::fill(out[q], out[q] + stride, 0.0);
   }
   const int blocks = static_cast<int>(m.blocks.size());
   const double *F = tangent_F.data(), *S = tangent_S_or_R.data();
   with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
     switch (count) {
-      case 1: force_differentials_blocked<volume_term, hourglass, 1>(m, 0, blocks, F, S, in, out); break;
-      case 2: force_differentials_blocked<volume_term, hourglass, 2>(m, 0, blocks, F, S, in, out); break;
-      default: force_differentials_blocked<volume_term, hourglass, 3>(m, 0, blocks, F, S, in, out); break;
+      case 1: force_differentials_blocked<Rows, volume_term, hourglass, 1>(m, 0, blocks, F, S, in, out); break;
+      case 2: force_differentials_blocked<Rows, volume_term, hourglass, 2>(m, 0, blocks, F, S, in, out); break;
+      default: force_differentials_blocked<Rows, volume_term, hourglass, 3>(m, 0, blocks, F, S, in, out); break;
     }
   });
+  for (int q = 0; q < count; ++q) from_rows(out[q], n, df[q]->data());
 }
 
 double mls_internal_forces_flops(const Model& m, const Points& x) {

@@ -14,14 +14,16 @@ namespace palpate {
 // Every function here is for an MLS model (model.solid == SolidKind::mls; asserted):
 // a hex-FEM model has no support domains. solid.h dispatches on the model.
 
-// f (3 x n, overwritten) = -dU/dx at positions x (3 x n).
+// f (3 x n, overwritten) = -dU/dx at positions x (3 x n). This overload and the
+// differential's without threads allocate the blocked loops' scratch per call (for tests
+// and tools); the step passes its State's WorkerThreads, whose scratch is allocated once.
 void mls_internal_forces(const Model& model, const Points& x, Points& f);
 
 // The same on threads.count() threads (core/thread_pool.h): the blocked loop's blocks cut
 // into count() contiguous ranges of about equal work (a pair of blocks never cut, for the
 // corotational law's pairing), thread 0 accumulating its forces into f, thread t > 0 into
-// threads.partial[t - 1], then f += partial[0] + partial[1] + ... coordinate by coordinate,
-// in that order, over count() ranges of coordinates. The split depends on the model and
+// buffer t - 1 of the threads' scratch, then f += buffer 0 + buffer 1 + ... coordinate by
+// coordinate, in that order, over count() ranges of coordinates. The split depends on the model and
 // the count only, so results are bit-identical between runs for a given count; count 1
 // (or the per-particle loops, which stay on one thread) is the function above, bit for
 // bit. Other counts differ from it by the order of the sums (round-off).
@@ -60,12 +62,13 @@ void mls_force_differential(const Model& model, const std::vector<double>& tange
 // pairs: df[q] = (df/dx) dx[q] (= -K dx[q]), q < count, each equal to mls_force_differential's
 // (the same arithmetic per direction; the tangent's F_i, S_i or R_i, the weights and, for the
 // corotational law, its rotation's linear system gathered or formed once for all of them).
-// On the calling thread; without the blocked loops (a Model without them) one product after
-// the other. dx[q] and df[q] must be distinct arrays, 3 x n.
+// On the calling thread, with scratch's rows (whatever its thread count); without the blocked
+// loops (a Model without them) one product after the other. dx[q] and df[q] must be distinct
+// arrays, 3 x n.
 inline constexpr int kMaxDifferentials = 3;
 void mls_force_differentials(const Model& model, const std::vector<double>& tangent_F,
                              const std::vector<double>& tangent_S_or_R, int count, const Points* const* dx,
-                             Points* const* df);
+                             Points* const* df, WorkerThreads& scratch);
 
 // Floating-point operations of one mls_internal_forces call at positions x (for the
 // benchmark's GFLOP/s), counted by hand from the blocked loop of the model's law; for the
@@ -94,10 +97,11 @@ void log_blocked(const double (&a)[Model::block_width], double (&log_a)[Model::b
 
 // The blocked force loop's memory work alone, for the benchmark: the same gathers, F
 // and scatters over the same slots, with the law replaced by P = F
-// (9 multiplications per particle; no volume term, no hourglass control). Its time is a
-// floor under every law's force evaluation on the model. Returns the flops it does, counted
-// as mls_internal_forces_flops counts the shared part. Requires the blocked layout.
-double pair_loop_floor(const Model& model, const Points& x, Points& f);
+// (9 multiplications per particle; no volume term, no hourglass control), with the same
+// conversions to and from padded rows, in scratch's rows. Its time is a floor under every
+// law's force evaluation on the model. Returns the flops it does, counted as
+// mls_internal_forces_flops counts the shared part. Requires the blocked layout.
+double pair_loop_floor(const Model& model, const Points& x, Points& f, WorkerThreads& scratch);
 }  // namespace detail
 
 }  // namespace palpate

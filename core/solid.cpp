@@ -41,7 +41,7 @@ void elastic_force_differential(const Model& model, Workspace& work, const Point
 void elastic_force_differentials(const Model& model, Workspace& work, int count, const Points* const* dx,
                                  Points* const* df) {
   if (model.solid == SolidKind::mls && work.threads.count() == 1)
-    return mls_force_differentials(model, work.tangent_F, work.tangent_S_or_R, count, dx, df);
+    return mls_force_differentials(model, work.tangent_F, work.tangent_S_or_R, count, dx, df, work.threads);
   for (int q = 0; q < count; ++q) elastic_force_differential(model, work, *dx[q], *df[q]);
 }
 

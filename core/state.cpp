@@ -55,7 +55,7 @@ State make_state(const Model& model, const Options& opt) {
 
 void use_threads(const Model& model, const Options& opt, State& state) {
   WorkerThreads& t = state.work.threads;
-  if (t.count() != opt.integrator.threads || (!t.partial.empty() && t.partial[0].cols() != model.particle_count))
+  if (t.count() != opt.integrator.threads || t.particles != model.particle_count)
     t.resize(opt.integrator.threads, model.particle_count);
 }
 

@@ -91,9 +91,15 @@ void WorkerThreads::resize(int threads, int particles) {
   if (threads < 1 || threads > kMaxThreads)
     throw std::invalid_argument("threads: " + std::to_string(threads) + " (1 ... " + std::to_string(kMaxThreads) + ")");
   if (threads != count()) pool = threads > 1 ? std::make_unique<ThreadPool>(threads) : nullptr;
-  partial.resize(static_cast<size_t>(threads - 1));
-  for (Points& p : partial)
-    if (p.cols() != particles) p.resize(3, particles);
+  this->particles = particles;
+  (void)row_buffers(row_buffers_needed(threads), particles);
+}
+
+double* WorkerThreads::row_buffers(int count, int particles) {
+  const size_t needed = 4 * static_cast<size_t>(count) * static_cast<size_t>(particles) + 4;
+  if (rows.size() < needed) rows.assign(needed, 0.0);  // assign: every page touched now
+  double* p = rows.data();
+  return p + (4 - reinterpret_cast<uintptr_t>(p) / sizeof(double) % 4) % 4;  // 32-byte aligned
 }
 
 }  // namespace palpate

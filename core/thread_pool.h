@@ -11,6 +11,7 @@
 //
 // Not re-entrant: one run at a time, from one thread at a time (the pool belongs to one
 // State). A task must not throw (a worker's exception terminates the program).
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -63,14 +64,17 @@ class ThreadPool {
 };
 
 // The threads of one State's loops (Workspace::threads): the pool of Options'
-// integrator.threads, and the per-thread force buffers of the loops that scatter to
-// both particles of a pair (mls_forces.cpp: thread t > 0 accumulates into partial[t - 1],
-// thread 0 into the result, then the buffers are added in a fixed order).
+// integrator.threads, and the scratch of the blocked MLS loops (mls_forces.cpp): on one
+// thread, positions and forces as padded rows (x, y, z, 0 per particle, 32-byte aligned;
+// two buffers, six for three directions at once); on T threads, the force buffers of
+// threads 1 ... T - 1 (thread 0 accumulates into the result, then the buffers are added
+// into it in a fixed order).
 // A copy of a Workspace gets no threads (it makes its own at its first step: a pool
 // belongs to one State); assigning one keeps the target's.
 struct WorkerThreads {
   std::unique_ptr<ThreadPool> pool;  // null: one thread, the caller's
-  std::vector<Points> partial;       // count() - 1 buffers, 3 x particles
+  std::vector<double> rows;          // the loops' padded rows (row_buffers); grown, never shrunk
+  int particles = 0;                 // what resize() sized rows for
 
   WorkerThreads() = default;
   explicit WorkerThreads(int threads, int particles = 0) { resize(threads, particles); }
@@ -81,9 +85,17 @@ struct WorkerThreads {
 
   int count() const { return pool ? pool->size() : 1; }
   // Makes the pool `threads` strong (a new one only if the count changes; 1: none) and
-  // sizes the buffers for `particles` (allocates only when either changes).
+  // sizes the scratch for `particles` (allocates and touches it only when either grows), so
+  // that no step allocates.
   void resize(int threads, int particles);
+  // `count` buffers of 4 x particles doubles each, consecutive, the first 32-byte aligned
+  // (grows the scratch if it is smaller: only a caller that skipped resize()).
+  double* row_buffers(int count, int particles);
 };
+
+// Buffers the loops take at most: the threads' but the first, or the rows of up to three
+// directions and their forces (mls_force_differentials).
+inline int row_buffers_needed(int threads) { return std::max(threads - 1, 6); }
 
 // The largest thread count the scenes and options accept (integrator.threads).
 constexpr int kMaxThreads = 64;

@@ -877,7 +877,8 @@ TEST(MlsSolid, PairLoopFloorIsTheForceLoopWithPEqualF) {
       expected.col(i) += g;
     }
   }
-  const double flops = detail::pair_loop_floor(m, x, f);
+  WorkerThreads scratch;
+  const double flops = detail::pair_loop_floor(m, x, f, scratch);
   EXPECT_LT((f - expected).cwiseAbs().maxCoeff(), 1e-12 * expected.cwiseAbs().maxCoeff());
   EXPECT_EQ(flops, 39.0 * m.neighbor_offset.back() + 27.0 * m.particle_count);
 }

@@ -89,13 +89,14 @@ TEST(WorkerThreads, CountsAndCopies) {
   EXPECT_EQ(one.count(), 1);
   WorkerThreads two(2, 10);
   EXPECT_EQ(two.count(), 2);
-  ASSERT_EQ(two.partial.size(), 1u);
-  EXPECT_EQ(two.partial[0].cols(), 10);
+  EXPECT_EQ(two.particles, 10);
+  EXPECT_GE(two.rows.size(), 4u * 10u * static_cast<size_t>(row_buffers_needed(2)));
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(two.row_buffers(3, 10)) % 32, 0u);
   const WorkerThreads copy(two);  // a copy has no threads of its own yet
   EXPECT_EQ(copy.count(), 1);
   two.resize(1, 10);
   EXPECT_EQ(two.count(), 1);
-  EXPECT_TRUE(two.partial.empty());
+  EXPECT_EQ(two.particles, 10);
   EXPECT_THROW(two.resize(0, 10), std::invalid_argument);
   EXPECT_THROW(two.resize(kMaxThreads + 1, 10), std::invalid_argument);
 }
