@@ -73,7 +73,7 @@ class ThreadPool {
 // belongs to one State); assigning one keeps the target's.
 struct WorkerThreads {
   std::unique_ptr<ThreadPool> pool;  // null: one thread, the caller's
-  std::vector<double> rows;          // the loops' padded rows (row_buffers); grown, never shrunk
+  std::vector<double> rows;          // the loops' scratch (row_buffers); grown, never shrunk
   int particles = 0;                 // what resize() sized rows for
 
   WorkerThreads() = default;
