@@ -12,12 +12,12 @@
 #include <string>
 #include <vector>
 
-#include <capnp/ez-rpc.h>
 #include <kj/async-io.h>
 #include <kj/timer.h>
 #include <kj/exception.h>
 
 #include "cli/arguments.h"
+#include "clients/connect.h"
 #include "clients/haptic.h"
 #include "core/hertz.h"
 #include "core/vtk_writer.h"
@@ -52,6 +52,15 @@ force latency (setPosition to the first frame whose commandSeq includes it), the
 server's statistics, and the rendering error at each frame: its render force against
 the previous frame's local model at its target and against the zero-order hold.
   --connect ADDR:PORT  the server (default 127.0.0.1:7420)
+  --tls-ca FILE        connect over TLS, trusting the PEM certificate(s) in FILE (a server
+                       started with --tls-cert); the certificate must name the host of
+                       --connect, or --tls-server-name NAME
+  --access-token-file FILE
+                       authenticate with the token in FILE (a server started with
+                       --access-token-file)
+  --tls-server-name NAME
+                       the name the server's certificate must carry (default: the host
+                       of --connect)
   --scene NAME         a scene of the server's --scene-dir by name, e.g. hertz_cube_haptic
                        (default: the server's default scene)
   --set KEY=VALUE      override a scene field by its dotted path (repeatable), e.g.
@@ -93,6 +102,7 @@ message, naming the field, is printed); 2 for a wrong argument.
 
 struct Args {
   std::string connect = "127.0.0.1:7420";
+  std::string tls_ca, tls_server_name, access_token_file;
   std::string scene;  // empty: the server's default scene
   std::vector<std::string> overrides;
   std::vector<double> forces;
@@ -112,6 +122,9 @@ Args parse_args(int argc, char** argv) {
   palpate::cli::parse_or_exit(argc, argv, "palpate-client", kUsage, [&](palpate::cli::Arguments& args) {
     const std::string& flag = args.flag();
     if (flag == "--connect") a.connect = args.value();
+    else if (flag == "--tls-ca") a.tls_ca = args.value();
+    else if (flag == "--tls-server-name") a.tls_server_name = args.value();
+    else if (flag == "--access-token-file") a.access_token_file = args.value();
     else if (flag == "--scene") a.scene = args.value();
     else if (flag == "--set") {
       const std::string assignment = args.value();
@@ -511,11 +524,14 @@ int run_headless(const Args& a, Session::Client session, palpate::wire::SessionI
 int main(int argc, char** argv) {
   const Args a = parse_args(argc, argv);
   try {
-    capnp::ReaderOptions options;
-    options.traversalLimitInWords = 256 * 1024 * 1024;
-    capnp::EzRpcClient client(a.connect, 7420, options);
-    auto& ws = client.getWaitScope();
-    auto server = client.getMain<PalpateServer>();
+    palpate::client::ConnectOptions connect;
+    connect.address = a.connect;
+    connect.tls_ca_file = a.tls_ca;
+    connect.tls_server_name = a.tls_server_name;
+    if (!a.access_token_file.empty()) connect.access_token = palpate::client::read_token_file(a.access_token_file);
+    palpate::client::ServerConnection client(connect);
+    auto& ws = client.wait_scope();
+    auto server = client.server();
     auto version = server.versionRequest().send().wait(ws);
     if (version.getProtocolVersion() != palpate::wire::PROTOCOL_VERSION)
       std::fprintf(stderr, "palpate-client: warning: server speaks protocol %u, this client %u\n",
@@ -533,7 +549,7 @@ int main(int argc, char** argv) {
                 info.getBuildSeconds());
     if (a.headless) return run_headless(a, opened.getSession(), info, h, info.getDt(), ws);
     if (a.haptic.haptic_rate > 0) return run_haptic(a, opened.getSession(), info, ws);
-    return run_realtime(a, opened.getSession(), h, ws, client.getIoProvider().getTimer());
+    return run_realtime(a, opened.getSession(), h, ws, client.timer());
   } catch (const kj::Exception& e) {
     std::fprintf(stderr, "palpate-client: %s\n", e.getDescription().cStr());
     return 1;

@@ -20,10 +20,15 @@ using Cxx = import "/capnp/c++.capnp";
 $Cxx.namespace("palpate::wire");
 using Json = import "/capnp/compat/json.capnp";
 
-const protocolVersion :UInt32 = 2;
+const protocolVersion :UInt32 = 3;
 # 2: the 3-D tool (position and force-vector commands, 3-D frames, the local
 # contact model, device limits, Session.close, Subscription.cancel) and scene
 # defaults that scale with the scene (changed defaults are not wire compatible).
+# 3: sessions belong to their opener (docs/protocol.md, "Security model"):
+# openSession returns a control token, attach() without it gives a read-only view
+# (commands refused), session ids are random and grant only viewing, only control
+# references keep a session alive, PalpateServer.authenticate for servers started
+# with an access token, and limits per connection and per session.
 
 # ---------------------------------------------------------------------------
 # Scene: the same content as a JSON scene file (docs/scene-format.md), with the
@@ -294,6 +299,8 @@ struct SessionInfo {
   referenceIndentation @22 :List(Float64);  # m, the converged indentation at each of referenceForces
   referenceUncertainty @23 :List(Float64);  # m, its uncertainty
   hapticRateHz @24 :Float64;   # OpenRequest.hapticRateHz in effect (0: off, a frame per step)
+  control @25 :Bool;           # this reference commands the session (openSession's, or attach() with the
+                               # control token); false: a read-only view (subscribe, stats, status, info)
 }
 
 # ---------------------------------------------------------------------------
@@ -459,6 +466,9 @@ struct Status {
 # Interfaces.
 
 interface Session {
+  # A control reference (openSession's, or attach() with the control token) may call
+  # every method; a read-only view (attach() without it) only subscribe, stats,
+  # status and info: its other calls are refused with a message that says so.
   setForce @0 (newtons :Float64) -> (seq :UInt64, queuedAtTick :Int64);
   # Force mode with the force (0, 0, -newtons): N, pressing down when positive,
   # applied at the start of the next tick. Refused, leaving the state untouched,
@@ -477,6 +487,10 @@ interface Session {
   subscribe @4 (sink :FrameSink, options :SubscribeOptions) -> (subscription :Subscription);
   # Streams frames to sink until the returned handle is released or the
   # connection drops. Headless sessions stream the frames step() produces.
+  # Refused beyond the server's --max-subscribers per session. Each subscriber
+  # has at most one frame in flight (the next is sent after its flow-control
+  # go-ahead; frames in between are dropped and counted), so one that never
+  # reads holds one frame and its socket's send buffer, nothing more.
 
   step @5 (n :UInt32, fields :FrameFields) -> (frame :Frame);
   # Headless sessions only: advances exactly n ticks (n <= 10^6) and returns the
@@ -503,24 +517,47 @@ interface Session {
   close @12 () -> ();
   # Ends the session now: its loop stops, every subscriber gets done("session
   # closed"), and every later call on it fails. Other references (attach) see it
-  # closed too. Idempotent.
+  # closed too. Idempotent. Control references only.
 }
 
 interface PalpateServer {
   # The bootstrap interface (named PalpateServer: a capnp interface called Server
-  # would clash with the generated C++ Server class).
+  # would clash with the generated C++ Server class). Each connection gets its own,
+  # and the limits per connection (sessions, wrong tokens) count on it.
   version @0 () -> (protocolVersion :UInt32, server :Text);
-  # protocolVersion = the constant above as compiled into the server.
+  # protocolVersion = the constant above as compiled into the server. Answered
+  # before authenticate() too, so that a client can tell what it talks to.
 
-  openSession @1 (request :OpenRequest) -> (session :Session, info :SessionInfo);
-  # Builds the scene's model (off the RPC thread) and starts the session.
-  # Releasing the session capability stops it.
+  openSession @1 (request :OpenRequest) -> (session :Session, info :SessionInfo, controlToken :Text);
+  # Builds the scene's model (off the RPC thread) and starts the session. `session`
+  # is the owner's control capability; the session lives while a control reference
+  # does (this one, or one attach() gave for the token) and closes when the last
+  # goes, read-only views included. controlToken (64 hex digits, 256 bits from the
+  # operating system's random source) is returned to the opener only: whoever
+  # presents it to attach() controls the session too, so hand it on only to whom
+  # you would hand the device. Refused beyond the server's --max-sessions, or the
+  # connection's --max-sessions-per-connection (the message names the limit).
 
   listScenes @2 () -> (names :List(Text));
   # Scene names available under --scene-dir.
 
-  attach @3 (sessionId :UInt32) -> (session :Session, info :SessionInfo);
+  attach @3 (sessionId :UInt32, controlToken :Text) -> (session :Session, info :SessionInfo);
   # Another reference to a live session (e.g. a viewer on its own connection, so
-  # that its bytes never share a socket with a haptic client's frames). The
-  # session lives while any reference does.
+  # that its bytes never share a socket with a haptic client's frames). Without a
+  # controlToken (empty) it is a read-only view: subscribe, stats, status and info
+  # work, and every command (setForce, setForceVector, setPosition, setCoupling,
+  # reset, pause, resume, step, close) is refused; a view does not keep the session
+  # alive (when its owner closes it or leaves, the view's subscribers get
+  # done("session closed") and its calls fail). With the session's controlToken it
+  # is a control reference like the owner's (info.control says which). A wrong
+  # token, or an id that names no live session, is refused after a delay, and a
+  # connection that has been refused --max-wrong-tokens times is refused every
+  # later attach() and authenticate().
+
+  authenticate @4 (accessToken :Text) -> (server :PalpateServer);
+  # On a server started with --access-token-file, a connection's bootstrap answers
+  # only version() and authenticate() until it presents that token; the capability
+  # returned serves everything. A wrong token is refused after a delay (counted like
+  # attach()'s). On a server without an access token it returns a capability like
+  # the bootstrap, whatever the token.
 }

@@ -13,6 +13,7 @@ packages=(
   python3-matplotlib python3-numpy   # plots in docs/ (glue only)
   clang libclang-rt-14-dev    # fuzz/: libFuzzer (libclang_rt.fuzzer) for Debian's clang 14 (test.sh --sanitize)
   chromium                    # the browser viewer's end-to-end test (headless, tests/browser/)
+  openssl                     # self-signed certificates for the TLS end-to-end test (tests/e2e/server_security_test.cpp)
 )
 # node and npm build the browser viewer (clients/viewer: npm ci of its pinned lock file).
 # A machine may have them from elsewhere (e.g. a nodejs that bundles npm): only what

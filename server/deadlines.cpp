@@ -57,6 +57,16 @@ Deadlines::Outcome Deadlines::finish(int64_t tick_start) {
     last_rest_ = end;
     o.watchdog_rest = true;
   }
+  if (heartbeat_ != nullptr && end - heartbeat_->last_ns.load(std::memory_order_relaxed) > RpcHeartbeat::kStarvedNs) {
+    // The RPC thread has not run for kStarvedNs: give way until it has (bounded).
+    const int64_t give_up = end + kMaxGiveWayNs;
+    while (end < give_up && end - heartbeat_->last_ns.load(std::memory_order_relaxed) > RpcHeartbeat::kStarvedNs) {
+      sleep_until_ns(end + 1'000'000);
+      end = now_ns();
+    }
+    last_rest_ = end;
+    o.watchdog_rest = true;
+  }
   if (end > deadline_) {
     o.missed = true;
     o.late_start = tick_start - (deadline_ - period_) > period_ / 2;

@@ -68,12 +68,13 @@ HapticSample render_sample(const RenderInput& model, const DeviceInput& device, 
 }
 
 HapticRenderer::HapticRenderer(double rate_hz, double max_force, double spin_margin_us, bool try_realtime,
-                               int wake_fd)
+                               int wake_fd, const RpcHeartbeat* rpc_heartbeat)
     : rate_hz_(rate_hz),
       max_force_(max_force),
       spin_margin_us_(spin_margin_us),
       try_realtime_(try_realtime),
-      wake_fd_(wake_fd) {
+      wake_fd_(wake_fd),
+      rpc_heartbeat_(rpc_heartbeat) {
   TripleBuffer<RenderInput> models;
   model_writer_ = std::move(models.writer);
   model_reader_ = std::move(models.reader);
@@ -114,14 +115,16 @@ HapticCounters HapticRenderer::counters() const {
 void HapticRenderer::run() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0);
   sched_param param{};
+  bool realtime = false;
   if (try_realtime_) {
     param.sched_priority = 11;  // above the session's loop (10): a render tick is microseconds
-    pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+    realtime = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) == 0;
   } else {
     pthread_setschedparam(pthread_self(), SCHED_OTHER, &param);
   }
   Deadlines deadlines(static_cast<int64_t>(std::llround(1e9 / rate_hz_)),
                       static_cast<int64_t>(spin_margin_us_ * 1000.0));
+  if (realtime) deadlines.give_way_to(rpc_heartbeat_);
   deadlines.start();
   int64_t tick = 0;
   while (!stop_.load(std::memory_order_relaxed)) {

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "core/types.h"
+#include "server/deadlines.h"
 #include "server/histogram.h"
 #include "server/snapshot.h"
 
@@ -82,7 +83,9 @@ class HapticRenderer {
   // Starts the thread: SCHED_FIFO one above the loop's priority when `try_realtime`
   // and allowed, ticking at rate_hz; each sample is published and signalled by
   // writing 1 to wake_fd (the session's eventfd).
-  HapticRenderer(double rate_hz, double max_force, double spin_margin_us, bool try_realtime, int wake_fd);
+  // rpc_heartbeat: given way to as the session's loop does (SimConfig::rpc_heartbeat).
+  HapticRenderer(double rate_hz, double max_force, double spin_margin_us, bool try_realtime, int wake_fd,
+                 const RpcHeartbeat* rpc_heartbeat = nullptr);
   ~HapticRenderer();  // stops and joins
   HapticRenderer(const HapticRenderer&) = delete;
   HapticRenderer& operator=(const HapticRenderer&) = delete;
@@ -99,6 +102,7 @@ class HapticRenderer {
   const double rate_hz_, max_force_, spin_margin_us_;
   const bool try_realtime_;
   const int wake_fd_;
+  const RpcHeartbeat* const rpc_heartbeat_;
   TripleBuffer<RenderInput>::Writer model_writer_;    // the session's loop
   TripleBuffer<RenderInput>::Reader model_reader_;    // renderer thread
   TripleBuffer<DeviceInput>::Writer device_writer_;   // RPC thread

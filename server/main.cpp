@@ -3,7 +3,7 @@
 //
 // Wiring, in order: options -> the default scene validated and built (a scene that
 // cannot be served stops here, status 1, before anything listens) -> event loop ->
-// listener -> ServerContext + bootstrap ServerImpl -> accept loop -> "listening" line
+// listener -> ServerContext (a bootstrap ServerImpl per connection) -> accept loop -> "listening" line
 // -> (--agones) Ready, then health pings -> wait for a signal -> stop the pings -> stop
 // every simulation thread -> close the sessions -> (--agones) Shutdown -> drop the
 // connections -> drop the event loop.
@@ -24,7 +24,9 @@
 #include <cstring>
 #include <thread>
 #include <filesystem>
+#include <fstream>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include <capnp/message.h>
@@ -44,7 +46,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using palpate::server::ServerContext;
-using palpate::server::ServerImpl;
 using palpate::server::ServerOptions;
 
 const char* kUsage = R"(usage: palpate-server [options]
@@ -87,6 +88,26 @@ loop, or headless stepping on request. Once it accepts connections it prints one
                        behind; 0 keeps the system's (default 262144)
   --max-sessions N     sessions at a time, [1, 1024] (default 16)
   --max-particles N    largest cloud a session may have, [8, 8000000] (default 200000)
+  --max-sessions-per-connection N
+                       live sessions one connection may have opened, [1, 1024] (default 4)
+  --max-subscribers N  subscribers per session, [1, 1024] (default 16)
+  --max-message-bytes N
+                       the largest message a client may send, [65536, 1073741824] bytes
+                       (default 16777216); a larger one ends its connection (over
+                       WebSocket at most 1 MiB whatever this says)
+  --max-wrong-tokens N refused tokens and unknown session ids one connection may send
+                       before its attach() and authenticate() are refused outright,
+                       [1, 1000000] (default 10); each refusal is answered after
+                       --wrong-token-delay-ms, [0, 10000] (default 250)
+  --access-token-file FILE
+                       a shared secret (one line, at least 32 characters, e.g.
+                       `openssl rand -hex 32`): a connection is served nothing but
+                       version() until it calls PalpateServer.authenticate with it
+                       (docs/protocol.md, "Security model")
+  --tls-cert FILE      serve both listeners over TLS with this PEM certificate (chain)
+  --tls-key FILE       and this PEM private key (both or neither). Without them a
+                       listener on an address other than loopback is warned about: the
+                       tokens and every command would cross the network in clear
   --agones             run as an Agones GameServer: tell the Agones SDK sidecar (REST on
                        localhost, port AGONES_SDK_HTTP_PORT, default 9358) POST /ready once
                        listening (retried until the sidecar answers), POST /health every
@@ -104,7 +125,8 @@ loop, or headless stepping on request. Once it accepts connections it prints one
   --help               print this text and exit
 Exit status: 0 after SIGINT or SIGTERM; 1 when the default scene cannot be served (the
 message names the file, the field and the reason) or the address cannot be used; 2 for a
-wrong argument (or, with --agones, an AGONES_SDK_HTTP_PORT that is not a port).
+wrong argument (or, with --agones, an AGONES_SDK_HTTP_PORT that is not a port; or an
+access token, certificate or key file that cannot be used: the message names it).
 )";
 
 struct HostPort {
@@ -134,6 +156,8 @@ struct Args {
   int sndbuf = 256 * 1024;
   ServerOptions options;
   bool agones = false;
+  size_t max_message_bytes = palpate::server::kDefaultMaxMessageBytes;
+  std::string access_token_file, tls_cert, tls_key;
   std::optional<unsigned> agones_port;  // --agones-port; else from the environment
   palpate::server::AgonesOptions agones_options;
 };
@@ -180,6 +204,22 @@ Args parse_args(int argc, char** argv) {
       a.options.max_particles = args.integer(8, 8000000);
     } else if (flag == "--max-sessions") {
       a.options.max_sessions = static_cast<int>(args.integer(1, 1024));
+    } else if (flag == "--max-sessions-per-connection") {
+      a.options.max_sessions_per_connection = static_cast<int>(args.integer(1, 1024));
+    } else if (flag == "--max-subscribers") {
+      a.options.max_subscribers = static_cast<int>(args.integer(1, 1024));
+    } else if (flag == "--max-message-bytes") {
+      a.max_message_bytes = static_cast<size_t>(args.integer(1 << 16, 1 << 30));
+    } else if (flag == "--max-wrong-tokens") {
+      a.options.max_wrong_tokens = static_cast<int>(args.integer(1, 1000000));
+    } else if (flag == "--wrong-token-delay-ms") {
+      a.options.wrong_token_delay_ms = static_cast<int>(args.integer(0, 10000));
+    } else if (flag == "--access-token-file") {
+      a.access_token_file = args.value();
+    } else if (flag == "--tls-cert") {
+      a.tls_cert = args.value();
+    } else if (flag == "--tls-key") {
+      a.tls_key = args.value();
     } else if (flag == "--agones") {
       a.agones = true;
     } else if (flag == "--agones-port") {
@@ -221,27 +261,43 @@ struct LogErrors : kj::TaskSet::ErrorHandler {
   void taskFailed(kj::Exception&& e) override { spdlog::debug("connection ended: {}", e.getDescription().cStr()); }
 };
 
-kj::Promise<void> accept_loop(kj::ConnectionReceiver& listener, capnp::Capability::Client bootstrap,
-                              kj::TaskSet& connections, int sndbuf, kj::Timer& timer) {
+kj::Promise<void> accept_loop(kj::ConnectionReceiver& listener, const palpate::server::AcceptOptions& accept,
+                              kj::TaskSet& connections, kj::Timer& timer) {
   return listener.accept()
       .then(
-          [&, bootstrap, sndbuf](kj::Own<kj::AsyncIoStream> stream) mutable {
-            // A small send buffer bounds how far a slow reader can fall behind (docs/protocol.md, "Flow control").
-            if (sndbuf > 0) stream->setsockopt(SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
-            const int one = 1;
-            stream->setsockopt(IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-            stream->setsockopt(SOL_SOCKET, SO_KEEPALIVE, &one, sizeof one);
-            auto connection = kj::heap<palpate::server::RpcConnection>(kj::mv(stream), bootstrap);
-            spdlog::debug("connection accepted");
-            auto done = connection->on_disconnect();
-            connections.add(done.attach(kj::mv(connection)));
+          [&](kj::Own<kj::AsyncIoStream> stream) {
+            // The socket's options and (TLS) the handshake run in the connection's task, so
+            // that a client slow to shake hands never holds up the next accept.
+            auto served = palpate::server::prepare_accepted(kj::mv(stream), accept)
+                              .then([&accept](kj::Own<kj::AsyncIoStream> s) {
+                                auto connection = kj::heap<palpate::server::RpcConnection>(
+                                    kj::mv(s), accept.bootstrap(), accept.max_message_bytes);
+                                spdlog::debug("connection accepted");
+                                auto done = connection->on_disconnect();
+                                return done.attach(kj::mv(connection));
+                              });
+            connections.add(kj::mv(served));
             return kj::Promise<void>(kj::READY_NOW);
           },
           [&timer](kj::Exception&& e) {  // e.g. out of descriptors: back off, keep serving
             spdlog::warn("accept failed: {}", e.getDescription().cStr());
             return timer.afterDelay(10 * kj::MILLISECONDS);
           })
-      .then([&, bootstrap, sndbuf]() mutable { return accept_loop(listener, bootstrap, connections, sndbuf, timer); });
+      .then([&]() { return accept_loop(listener, accept, connections, timer); });
+}
+
+// Whether `host` (a --listen or --http address) is a loopback address.
+bool is_loopback(const std::string& host) {
+  return host == "localhost" || host == "::1" || host == "[::1]" || host.rfind("127.", 0) == 0;
+}
+
+// A file's whole text, or std::invalid_argument naming the option and the file.
+std::string read_text(const std::string& flag, const std::string& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw std::invalid_argument(flag + " " + file + ": cannot be read (" + std::strerror(errno) + ")");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
 }
 
 }  // namespace
@@ -258,6 +314,26 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "palpate-server: --agones: %s\n", e.what());
       return 2;
     }
+  }
+  // The secrets and certificates, before anything is built or listens (exit 2 naming the file).
+  std::optional<kj::TlsKeypair> tls_keypair;
+  try {
+    if (!args.access_token_file.empty())
+      args.options.access_token = palpate::server::read_access_token(args.access_token_file);
+    if (args.tls_cert.empty() != args.tls_key.empty())
+      throw std::invalid_argument("--tls-cert and --tls-key go together: give both or neither");
+    if (!args.tls_cert.empty()) {
+      const std::string cert = read_text("--tls-cert", args.tls_cert), key = read_text("--tls-key", args.tls_key);
+      try {
+        tls_keypair.emplace(kj::TlsKeypair{kj::TlsPrivateKey(key.c_str()), kj::TlsCertificate(cert.c_str())});
+      } catch (const kj::Exception& e) {
+        throw std::invalid_argument("--tls-cert " + args.tls_cert + " / --tls-key " + args.tls_key +
+                                    ": not a PEM certificate and private key (" + e.getDescription().cStr() + ")");
+      }
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "palpate-server: %s\n", e.what());
+    return 2;
   }
   std::signal(SIGPIPE, SIG_IGN);
   // Before any thread exists: the signals are blocked and delivered to the event loop. Also
@@ -303,11 +379,34 @@ int main(int argc, char** argv) {
     const unsigned port = listener->getPort();
 
     ServerContext ctx(io, args.options);
+    // TLS (--tls-cert): a handshake not finished within 10 s ends its connection.
+    kj::Own<kj::TlsContext> tls;
+    if (tls_keypair) {
+      kj::TlsContext::Options tls_options;
+      tls_options.defaultKeypair = *tls_keypair;
+      tls_options.timer = io.provider->getTimer();
+      tls_options.acceptTimeout = 10 * kj::SECONDS;
+      tls = kj::heap<kj::TlsContext>(kj::mv(tls_options));
+    }
+    for (const auto& [flag, host] : {std::pair<const char*, std::string>{"--listen", args.host},
+                                     {"--http", args.http ? args.http->host : std::string("127.0.0.1")}})
+      if (!tls && !is_loopback(host))
+        spdlog::warn("{} {}: listening beyond loopback WITHOUT TLS: control tokens, access tokens and every force "
+                     "command cross the network in clear text; give --tls-cert and --tls-key, or put a "
+                     "TLS-terminating proxy in front (docs/protocol.md, \"Security model\")",
+                     flag, host);
+    if (args.options.access_token.empty() && (!is_loopback(args.host) || (args.http && !is_loopback(args.http->host))))
+      spdlog::warn("no --access-token-file: anyone who reaches the port may open sessions (docs/protocol.md, "
+                   "\"Security model\")");
+    palpate::server::AcceptOptions accept;
+    accept.sndbuf = args.sndbuf;
+    accept.max_message_bytes = args.max_message_bytes;
+    accept.tls = tls.get();
+    accept.bootstrap = [&ctx] { return ctx.bootstrap_for_connection(); };
     {
       LogErrors log_errors;
       kj::TaskSet connections(log_errors);
-      capnp::Capability::Client bootstrap = kj::heap<ServerImpl>(ctx);
-      auto accepting = accept_loop(*listener, bootstrap, connections, args.sndbuf, io.provider->getTimer())
+      auto accepting = accept_loop(*listener, accept, connections, io.provider->getTimer())
                            .eagerlyEvaluate([](kj::Exception&& e) {
                              spdlog::error("accept loop ended: {}", e.getDescription().cStr());
                            });
@@ -327,14 +426,14 @@ int main(int argc, char** argv) {
         palpate::server::WebProbes probes;
         probes.ready = [] { return palpate::server::Probe{true, "ok: the default scene is valid"}; };
         probes.health = [&ctx, window = palpate::server::HealthWindow{}]() mutable { return ctx.health_probe(window); };
-        web = kj::heap<palpate::server::WebServer>(io.provider->getTimer(), args.web, std::move(probes), bootstrap,
-                                                   args.sndbuf);
+        web = kj::heap<palpate::server::WebServer>(io.provider->getTimer(), args.web, std::move(probes), accept);
         web_accepting = web->listen(*web_listener).eagerlyEvaluate([](kj::Exception&& e) {
           spdlog::error("web accept loop ended: {}", e.getDescription().cStr());
         });
       }
-      std::printf("palpate-server listening on %s:%u\n", args.host.c_str(), port);
-      if (args.http) std::printf("palpate-server web on http://%s:%u/\n", args.http->host.c_str(), web_port);
+      std::printf("palpate-server listening on %s:%u%s\n", args.host.c_str(), port, tls ? " (TLS)" : "");
+      if (args.http)
+        std::printf("palpate-server web on %s://%s:%u/\n", tls ? "https" : "http", args.http->host.c_str(), web_port);
       std::fflush(stdout);
       spdlog::info("scene dir {}, default scene {}, {} Hz", ctx.options.scene_dir.string(),
                    ctx.options.default_scene.string(), ctx.options.rate_hz);

@@ -30,6 +30,12 @@ struct ServerOptions {
   int checkpoint_interval = 100;
   int max_sessions = 16;                // concurrent sessions (each owns a thread and a model)
   int64_t max_particles = 200000;       // clouds refused beyond this (memory bound per session)
+  // Access control and limits (docs/protocol.md, "Security model"; palpate-server --help).
+  int max_sessions_per_connection = 4;  // live sessions one connection may have opened
+  int max_subscribers = 16;             // subscribers per session
+  int max_wrong_tokens = 10;            // refused tokens (and unknown session ids) per connection
+  int wrong_token_delay_ms = 250;       // a refused token's answer waits this long
+  std::string access_token;             // --access-token-file's token; empty: no connection-time check
 };
 
 // Node and mesh files a client may name: regular files of at most this size.

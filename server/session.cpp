@@ -137,8 +137,19 @@ void fill_percentiles(wire::Percentiles::Builder b, const Histogram::Summary& s)
 // ---------------------------------------------------------------------------
 // ServerContext
 
+namespace {
+kj::Promise<void> beat(kj::Timer& timer, RpcHeartbeat& heartbeat) {
+  heartbeat.last_ns.store(now_ns(), std::memory_order_relaxed);
+  return timer.afterDelay(RpcHeartbeat::kPeriodNs * kj::NANOSECONDS).then([&timer, &heartbeat]() {
+    return beat(timer, heartbeat);
+  });
+}
+}  // namespace
+
 ServerContext::ServerContext(kj::AsyncIoContext& io_, ServerOptions options_)
-    : io(io_), options(std::move(options_)) {}
+    : io(io_), options(std::move(options_)) {
+  tasks_.add(beat(io.provider->getTimer(), heartbeat));
+}
 
 void ServerContext::ErrorHandler::taskFailed(kj::Exception&& e) {
   spdlog::debug("task ended: {}", e.getDescription().cStr());
@@ -181,11 +192,24 @@ void ServerContext::adopt_starting(std::unique_ptr<Simulation> sim) {
 // ---------------------------------------------------------------------------
 // SessionImpl
 
+// How read-only views and subscriptions reach their session without keeping it alive: the
+// session clears `session` when it ends. RPC thread only.
+struct SessionLink {
+  SessionImpl* session;
+};
+
 class SessionImpl final : public wire::Session::Server {
  public:
   // Starts the session's thread on the plan; the scene is resolved and validated there.
-  SessionImpl(ServerContext& ctx, OpenPlan plan)
-      : ctx_(ctx), id_(ctx.next_session_id++), sim_(start(plan, ctx.options, ctx.next_loop_cpu(plan.sim.headless))) {
+  // `opener`: the connection that opened it (its count of live sessions).
+  SessionImpl(ServerContext& ctx, OpenPlan plan, std::shared_ptr<ConnectionState> opener)
+      : ctx_(ctx),
+        id_(ctx.new_session_id()),
+        control_token_(random_hex(kControlTokenBytes)),
+        opener_(std::move(opener)),
+        link_(std::make_shared<SessionLink>(SessionLink{this})),
+        sim_(start(plan, ctx)) {
+    ++opener_->sessions_open;
     ctx_.sessions[id_] = this;
     wake_ = ctx_.io.lowLevelProvider->wrapInputFd(
         sim_->wake_fd(), kj::LowLevelAsyncIoProvider::ALREADY_CLOEXEC | kj::LowLevelAsyncIoProvider::ALREADY_NONBLOCK);
@@ -196,6 +220,8 @@ class SessionImpl final : public wire::Session::Server {
 
   ~SessionImpl() noexcept(false) {
     ctx_.sessions.erase(id_);
+    link_->session = nullptr;  // views and subscriptions see the session gone
+    release_slot();
     if (!closed_) ctx_.add_task(end_subscriptions("session closed"));
     wake_loop_ = nullptr;
     wake_ = nullptr;  // the eventfd is watched by one object at a time
@@ -223,6 +249,14 @@ class SessionImpl final : public wire::Session::Server {
 
   void stop() { sim_->stop(); }
   wire::Session::Client self() { return thisCap(); }
+  uint32_t id() const { return id_; }
+  // Gives the opener's connection its slot back (--max-sessions-per-connection), once.
+  void release_slot() {
+    if (holds_slot_) --opener_->sessions_open;
+    holds_slot_ = false;
+  }
+  const std::string& control_token() const { return control_token_; }
+  const std::shared_ptr<SessionLink>& link() const { return link_; }
   const Simulation& simulation() const { return *sim_; }
   bool closed() const { return closed_; }
 
@@ -240,6 +274,7 @@ class SessionImpl final : public wire::Session::Server {
   kj::Promise<void> close_session(const char* reason) {
     if (closed_) return kj::READY_NOW;
     closed_ = true;
+    release_slot();  // a closed session counts against no limit
     if (sim_->phase() != Phase::starting) sim_->stop();
     return end_subscriptions(reason);
   }
@@ -250,8 +285,10 @@ class SessionImpl final : public wire::Session::Server {
     return req.send().ignoreResult().catch_([](kj::Exception&&) {});
   }
 
-  void fill_info(wire::SessionInfo::Builder info) {
+  // `control`: for a control reference (SessionInfo.control), else a read-only view's.
+  void fill_info(wire::SessionInfo::Builder info, bool control) {
     KJ_ASSERT(phase_ == Phase::ready);
+    info.setControl(control);
     const Model& m = sim_->model();
     const Scene& s = sim_->scene();
     info.setSceneName(s.name);
@@ -458,7 +495,7 @@ class SessionImpl final : public wire::Session::Server {
   }
 
   kj::Promise<void> info(InfoContext context) override {
-    fill_info(context.getResults().initInfo());
+    fill_info(context.getResults().initInfo(), true);
     return kj::READY_NOW;
   }
 
@@ -497,9 +534,11 @@ class SessionImpl final : public wire::Session::Server {
     });
   }
 
-  static std::unique_ptr<Simulation> start(OpenPlan& plan, const ServerOptions& options, int cpu) {
+  static std::unique_ptr<Simulation> start(OpenPlan& plan, ServerContext& ctx) {
     SimConfig config = plan.sim;
-    config.cpu = cpu;
+    config.cpu = ctx.next_loop_cpu(plan.sim.headless);
+    config.rpc_heartbeat = &ctx.heartbeat;
+    const ServerOptions& options = ctx.options;
     // Runs on the session's thread; RPC errors become plain exceptions there.
     auto prepare = [plan = std::move(plan), options]() -> Scene {
       try {
@@ -653,6 +692,10 @@ class SessionImpl final : public wire::Session::Server {
   // parts the session's thread touches).
   ServerContext& ctx_;
   uint32_t id_;
+  std::string control_token_;                // attach() with it gives a control reference (server/access.h)
+  std::shared_ptr<ConnectionState> opener_;  // the connection that opened it (sessions_open)
+  std::shared_ptr<SessionLink> link_;        // cleared when the session ends
+  bool holds_slot_ = true;                   // counted in opener_->sessions_open
   uint32_t logged_blow_ups_ = 0;   // recoveries already logged (on_wake)
   std::unique_ptr<Simulation> sim_;  // declared before the watchers: destroyed after them
   kj::Own<kj::AsyncInputStream> wake_;
@@ -670,22 +713,65 @@ class SessionImpl final : public wire::Session::Server {
   std::list<Subscriber> subscribers_;
 };
 
-// Releasing the handle (or losing the connection) unsubscribes. Holds the
-// session so that it outlives its subscriptions.
+// Releasing the handle (or losing the connection) unsubscribes. It does not keep the
+// session alive (only control references do): when the session ends first, its sink has
+// had done() and the handle does nothing.
 class SubscriptionImpl final : public wire::Subscription::Server {  // RPC thread only
  public:
-  SubscriptionImpl(wire::Session::Client session_cap, SessionImpl& session, uint32_t id)
-      : session_cap_(kj::mv(session_cap)), session_(session), id_(id) {}
-  ~SubscriptionImpl() noexcept(false) { session_.unsubscribe(id_); }
+  SubscriptionImpl(std::shared_ptr<SessionLink> session, uint32_t id) : session_(std::move(session)), id_(id) {}
+  ~SubscriptionImpl() noexcept(false) {
+    if (SessionImpl* s = session_->session) s->unsubscribe(id_);
+  }
 
   kj::Promise<void> cancel(CancelContext) override {
-    session_.unsubscribe(id_, "subscription cancelled");  // a second call finds nothing
+    // A second call finds nothing.
+    if (SessionImpl* s = session_->session) s->unsubscribe(id_, "subscription cancelled");
     return kj::READY_NOW;
   }
 
  private:
-  wire::Session::Client session_cap_;
-  SessionImpl& session_;
+  std::shared_ptr<SessionLink> session_;
+  uint32_t id_;
+};
+
+// A read-only view of a session (attach() without the control token): subscribe, stats,
+// status and info, forwarded to the session while it lives; every command refused. It
+// does not keep the session alive. RPC thread only.
+class SessionViewImpl final : public wire::Session::Server {
+ public:
+  SessionViewImpl(std::shared_ptr<SessionLink> session, uint32_t id) : session_(std::move(session)), id_(id) {}
+
+  kj::Promise<void> subscribe(SubscribeContext context) override { return live("subscribe").subscribe(context); }
+  kj::Promise<void> stats(StatsContext context) override { return live("stats").stats(context); }
+  kj::Promise<void> status(StatusContext context) override { return live("status").status(context); }
+  kj::Promise<void> info(InfoContext context) override {
+    live("info").fill_info(context.getResults().initInfo(), false);
+    return kj::READY_NOW;
+  }
+
+  kj::Promise<void> setForce(SetForceContext) override { refuse("setForce"); }
+  kj::Promise<void> setForceVector(SetForceVectorContext) override { refuse("setForceVector"); }
+  kj::Promise<void> setPosition(SetPositionContext) override { refuse("setPosition"); }
+  kj::Promise<void> setCoupling(SetCouplingContext) override { refuse("setCoupling"); }
+  kj::Promise<void> reset(ResetContext) override { refuse("reset"); }
+  kj::Promise<void> pause(PauseContext) override { refuse("pause"); }
+  kj::Promise<void> resume(ResumeContext) override { refuse("resume"); }
+  kj::Promise<void> step(StepContext) override { refuse("step"); }
+  kj::Promise<void> close(CloseContext) override { refuse("close"); }
+
+ private:
+  SessionImpl& live(const char* method) const {
+    if (session_->session == nullptr)
+      fail(std::string(method) + ": session " + std::to_string(id_) + " has ended (its owner closed it or left)");
+    return *session_->session;
+  }
+  [[noreturn]] void refuse(const char* method) const {
+    fail(std::string(method) + ": this is a read-only view of session " + std::to_string(id_) +
+         " (attach() without its control token): it may subscribe and read stats, status and info; commands need "
+         "the owner's capability, or attach() with the session's control token");
+  }
+
+  std::shared_ptr<SessionLink> session_;
   uint32_t id_;
 };
 
@@ -695,7 +781,10 @@ kj::Promise<void> SessionImpl::subscribe(SubscribeContext context) {
   auto options = params.getOptions();
   const double rate = options.getRateHz();
   check_subscriber_rate(rate);
-  if (subscribers_.size() >= 64) fail("subscribe: this session already has 64 subscribers");
+  const auto most = static_cast<size_t>(ctx_.options.max_subscribers);
+  if (subscribers_.size() >= most)
+    fail("subscribe: this session already has " + std::to_string(subscribers_.size()) +
+         " subscribers, the server's limit (palpate-server --max-subscribers " + std::to_string(most) + ")");
   const FieldRequest fields = request_of(options.getFields());
   check_fields("subscribe: options.fields", fields);
   Subscriber sub{ctx_.next_subscriber_id++, params.getSink(), rate, rate > 0.0 ? static_cast<int64_t>(1e9 / rate) : 0,
@@ -705,7 +794,7 @@ kj::Promise<void> SessionImpl::subscribe(SubscribeContext context) {
   subscribers_.push_back(kj::mv(sub));
   update_wanted();
   spdlog::debug("session {}: subscriber {} at {} Hz", id_, id, rate);
-  context.getResults().setSubscription(kj::heap<SubscriptionImpl>(thisCap(), *this, id));
+  context.getResults().setSubscription(kj::heap<SubscriptionImpl>(link_, id));
   return kj::READY_NOW;
 }
 
@@ -718,23 +807,55 @@ kj::Promise<void> ServerImpl::version(VersionContext context) {
   return kj::READY_NOW;
 }
 
+void ServerImpl::check_authenticated(const char* method) const {
+  if (!authenticated_)
+    fail(std::string(method) +
+         ": this server requires an access token: call PalpateServer.authenticate(accessToken) first and use the "
+         "capability it returns (palpate-server --access-token-file)");
+}
+
+kj::Promise<void> ServerImpl::authenticate(AuthenticateContext context) {
+  const std::string& expected = ctx_.options.access_token;
+  if (!expected.empty()) {
+    ctx_.check_guesses_left(*connection_, "authenticate");
+    const auto token = context.getParams().getAccessToken();
+    if (!tokens_equal(std::string_view(token.begin(), token.size()), expected))
+      return ctx_.refuse_guess(*connection_, "authenticate: accessToken: not this server's access token");
+  }
+  context.getResults().setServer(kj::heap<ServerImpl>(ctx_, connection_, true));
+  return kj::READY_NOW;
+}
+
 kj::Promise<void> ServerImpl::listScenes(ListScenesContext context) {
+  check_authenticated("listScenes");
   const auto names = scene_names(ctx_.options.scene_dir);
   auto list = context.getResults().initNames(static_cast<unsigned>(names.size()));
   for (unsigned k = 0; k < names.size(); ++k) list.set(k, names[k]);
   return kj::READY_NOW;
 }
 
+// Without a token: a read-only view (SessionViewImpl). With the session's control token: its
+// control capability. An unknown id or a wrong token: refused after a delay, and counted.
 kj::Promise<void> ServerImpl::attach(AttachContext context) {
+  check_authenticated("attach");
+  ctx_.check_guesses_left(*connection_, "attach");
   const uint32_t id = context.getParams().getSessionId();
+  const auto token = context.getParams().getControlToken();
   const auto it = ctx_.sessions.find(id);
-  if (it == ctx_.sessions.end()) fail("attach: sessionId: no live session " + std::to_string(id));
+  if (it == ctx_.sessions.end())
+    return ctx_.refuse_guess(*connection_, "attach: sessionId: no live session " + std::to_string(id));
   SessionImpl& session = *it->second;
+  const bool control = token.size() > 0;
+  if (control && !tokens_equal(std::string_view(token.begin(), token.size()), session.control_token()))
+    return ctx_.refuse_guess(*connection_, "attach: controlToken: not the control token of session " +
+                                               std::to_string(id) + " (leave it empty for a read-only view)");
+  wire::Session::Client cap = control ? session.self() : kj::heap<SessionViewImpl>(session.link(), id);
   context.allowCancellation();  // waiting for a start holds nothing worth finishing
   auto ready = session.when_ready();
-  return ready.then([context, cap = session.self(), &session]() mutable {
+  return ready.then([context, cap = kj::mv(cap), link = session.link(), control]() mutable {
+    if (link->session == nullptr) fail("attach: the session ended while it was starting");
     auto results = context.getResults();
-    session.fill_info(results.initInfo());
+    link->session->fill_info(results.initInfo(), control);
     results.setSession(kj::mv(cap));
   });
 }
@@ -743,13 +864,21 @@ kj::Promise<void> ServerImpl::attach(AttachContext context) {
 // validated, its files read and its model built on the session's thread, and the
 // call resolves (or rejects with that thread's message) when it is done.
 kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
-  const size_t running = ctx_.sessions.size() + ctx_.closing_sessions();
+  check_authenticated("openSession");
+  // Closed sessions whose capabilities are still held count against no limit.
+  size_t running = ctx_.closing_sessions();
+  for (const auto& [id, s] : ctx_.sessions) running += s->closed() ? 0 : 1;
   if (static_cast<int>(running) >= ctx_.options.max_sessions)
-    fail("openSession: the server already runs " + std::to_string(running) + " sessions (the limit)");
+    fail("openSession: the server already runs " + std::to_string(running) +
+         " sessions, its limit (palpate-server --max-sessions " + std::to_string(ctx_.options.max_sessions) + ")");
+  if (connection_->sessions_open >= ctx_.options.max_sessions_per_connection)
+    fail("openSession: this connection already has " + std::to_string(connection_->sessions_open) +
+         " live sessions, the limit per connection (palpate-server --max-sessions-per-connection " +
+         std::to_string(ctx_.options.max_sessions_per_connection) + "): close one first");
   OpenPlan plan = plan_session(context.getParams().getRequest(), ctx_.options);
   context.allowCancellation();  // a caller that cancels or disconnects drops the start (below)
 
-  auto impl = kj::heap<SessionImpl>(ctx_, std::move(plan));
+  auto impl = kj::heap<SessionImpl>(ctx_, std::move(plan), connection_);
   SessionImpl& session = *impl;
   wire::Session::Client cap = kj::mv(impl);
   auto ready = session.when_ready();
@@ -757,9 +886,35 @@ kj::Promise<void> ServerImpl::openSession(OpenSessionContext context) {
   // still starting, is cancelled and handed to ctx_.adopt_starting (no wait here).
   return ready.then([context, cap = kj::mv(cap), &session]() mutable {
     auto results = context.getResults();
-    session.fill_info(results.initInfo());
+    session.fill_info(results.initInfo(), true);
+    results.setControlToken(session.control_token());
     results.setSession(kj::mv(cap));
   });
+}
+
+capnp::Capability::Client ServerContext::bootstrap_for_connection() {
+  return kj::heap<ServerImpl>(*this, std::make_shared<ConnectionState>(), options.access_token.empty());
+}
+
+uint32_t ServerContext::new_session_id() const {
+  uint32_t id = random_session_id();
+  while (sessions.count(id) != 0) id = random_session_id();
+  return id;
+}
+
+void ServerContext::check_guesses_left(const ConnectionState& connection, const char* method) const {
+  if (connection.wrong_tokens >= options.max_wrong_tokens)
+    fail(std::string(method) + ": this connection was refused " + std::to_string(connection.wrong_tokens) +
+         " tokens or session ids, its limit (palpate-server --max-wrong-tokens " +
+         std::to_string(options.max_wrong_tokens) + "): it may try no more");
+}
+
+kj::Promise<void> ServerContext::refuse_guess(ConnectionState& connection, std::string message) {
+  ++connection.wrong_tokens;
+  spdlog::info("refused: {}", message);  // names the method and the id, never a token
+  return io.provider->getTimer()
+      .afterDelay(options.wrong_token_delay_ms * kj::MILLISECONDS)
+      .then([message = std::move(message)]() { fail(message); });
 }
 
 void ServerContext::stop_all() {

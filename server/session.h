@@ -14,6 +14,7 @@
 #include <kj/async-io.h>
 
 #include "protocol/palpate.capnp.h"
+#include "server/access.h"
 #include "server/requests.h"
 #include "server/sim_loop.h"
 #include "server/web.h"
@@ -43,9 +44,23 @@ struct ServerContext {
   ServerContext(kj::AsyncIoContext& io, ServerOptions options);
   kj::AsyncIoContext& io;
   ServerOptions options;
-  std::map<uint32_t, SessionImpl*> sessions;  // by id, starting ones included
+  std::map<uint32_t, SessionImpl*> sessions;  // by id (random, server/access.h), starting ones included
+  // Stamped by a timer of this thread every RpcHeartbeat::kPeriodNs; the real-time loops
+  // give way when it is stale (server/deadlines.h).
+  RpcHeartbeat heartbeat;
   uint32_t next_subscriber_id = 1;
-  uint32_t next_session_id = 1;
+
+  // A new connection's bootstrap capability, with its own ConnectionState (its limits):
+  // the full PalpateServer, or, with an access token (--access-token-file), one that
+  // serves only version() and authenticate() until the token is presented.
+  capnp::Capability::Client bootstrap_for_connection();
+  // A session id no live session has (random_session_id()).
+  uint32_t new_session_id() const;
+  // A refused token or unknown session id on `connection`: counted, and the call fails
+  // with `message` after options.wrong_token_delay_ms (the delay does not hold the loop).
+  kj::Promise<void> refuse_guess(ConnectionState& connection, std::string message);
+  // Refuses the call at once when `connection` has been refused max_wrong_tokens times.
+  void check_guesses_left(const ConnectionState& connection, const char* method) const;
 
   // Stops every simulation thread (before the event loop goes away). Waits for
   // starts in progress to reach the end of their stage.
@@ -90,17 +105,24 @@ struct ServerContext {
   kj::TaskSet tasks_{error_handler_};
 };
 
-// The bootstrap capability, one per server (every connection shares it). RPC thread only.
+// The bootstrap capability, one per connection (ServerContext::bootstrap_for_connection),
+// and the ones authenticate() returns on it. `authenticated` false: only version() and
+// authenticate() are served. RPC thread only.
 class ServerImpl final : public wire::PalpateServer::Server {
  public:
-  explicit ServerImpl(ServerContext& ctx) : ctx_(ctx) {}
+  ServerImpl(ServerContext& ctx, std::shared_ptr<ConnectionState> connection, bool authenticated)
+      : ctx_(ctx), connection_(std::move(connection)), authenticated_(authenticated) {}
   kj::Promise<void> version(VersionContext context) override;
   kj::Promise<void> openSession(OpenSessionContext context) override;
   kj::Promise<void> listScenes(ListScenesContext context) override;
   kj::Promise<void> attach(AttachContext context) override;
+  kj::Promise<void> authenticate(AuthenticateContext context) override;
 
  private:
+  void check_authenticated(const char* method) const;
   ServerContext& ctx_;
+  std::shared_ptr<ConnectionState> connection_;
+  bool authenticated_;
 };
 
 }  // namespace palpate::server

@@ -197,7 +197,7 @@ void Simulation::prepare_and_build() {
   }
   if (config_.haptic_rate_hz > 0.0 && !config_.headless)
     haptic_ = std::make_unique<HapticRenderer>(config_.haptic_rate_hz, config_.device.max_force, config_.spin_margin_us,
-                                               config_.try_realtime, wake_fd_);
+                                               config_.try_realtime, wake_fd_, config_.rpc_heartbeat);
   rest_ = std::make_unique<Checkpoint>(*state_);
   checkpoint_ = std::make_unique<Checkpoint>(*state_);
   SnapshotBuffer frames([n = model_->particle_count](Snapshot& s) { s.reserve(n); });
@@ -286,6 +286,7 @@ void Simulation::run_realtime() {
   }
   Deadlines deadlines(static_cast<int64_t>(std::llround(1e9 / config_.rate_hz)),
                       static_cast<int64_t>(config_.spin_margin_us * 1000.0));
+  if (realtime_priority_.load()) deadlines.give_way_to(config_.rpc_heartbeat);
   deadlines.start();
   start_ns_.store(now_ns(), std::memory_order_relaxed);
   while (!stop_.load(std::memory_order_relaxed)) {

@@ -83,6 +83,9 @@ struct SimConfig {
   // key matches the session's scene is read on the session's thread at its start and
   // given to clients (SessionInfo.reference*). Empty: none looked up.
   std::filesystem::path reference_dir;
+  // The server's RPC thread's heartbeat (server/deadlines.h): a real-time loop granted
+  // SCHED_FIFO gives way when it is stale (Deadlines::give_way_to). Null: never.
+  const RpcHeartbeat* rpc_heartbeat = nullptr;
   // TEST HOOK (tests/server_simulation_test.cpp only; empty in the server): called on
   // the session's thread with the state just before each step, e.g. to inject a NaN.
   std::function<void(State&)> before_step_for_tests;

@@ -73,14 +73,14 @@ const char* content_type_for(const fs::path& file) {
 class WebServer::Service final : public kj::HttpService {
  public:
   Service(const kj::HttpHeaderTable& table, kj::HttpHeaderId origin, kj::HttpHeaderId cache_control,
-          kj::HttpHeaderId nosniff, WebOptions options, WebProbes probes, capnp::Capability::Client bootstrap)
+          kj::HttpHeaderId nosniff, WebOptions options, WebProbes probes, const AcceptOptions& accept)
       : table_(table),
         origin_(origin),
         cache_control_(cache_control),
         nosniff_(nosniff),
         options_(std::move(options)),
         probes_(std::move(probes)),
-        bootstrap_(kj::mv(bootstrap)) {}
+        accept_(accept) {}
 
   kj::Promise<void> request(kj::HttpMethod method, kj::StringPtr url, const kj::HttpHeaders& headers,
                             kj::AsyncInputStream&, Response& response) override {
@@ -94,7 +94,8 @@ class WebServer::Service final : public kj::HttpService {
                     "this Origin may not open RPC sessions here (palpate-server --allow-origin)\n");
       }
       kj::HttpHeaders reply(table_);
-      auto connection = kj::heap<RpcConnection>(response.acceptWebSocket(reply), bootstrap_);
+      auto connection =
+          kj::heap<RpcConnection>(response.acceptWebSocket(reply), accept_.bootstrap(), accept_.max_message_bytes);
       spdlog::debug("WebSocket RPC connection accepted");
       // The HTTP connection lives as long as this promise: until the peer goes.
       auto done = connection->on_disconnect();
@@ -138,7 +139,7 @@ class WebServer::Service final : public kj::HttpService {
   kj::HttpHeaderId origin_, cache_control_, nosniff_;
   WebOptions options_;
   WebProbes probes_;
-  capnp::Capability::Client bootstrap_;
+  const AcceptOptions& accept_;  // the WebServer's
 };
 
 namespace {
@@ -148,16 +149,15 @@ struct LogEnded : kj::TaskSet::ErrorHandler {
 LogEnded log_ended;
 }  // namespace
 
-WebServer::WebServer(kj::Timer& timer, WebOptions options, WebProbes probes, capnp::Capability::Client bootstrap,
-                     int sndbuf)
-    : timer_(timer), sndbuf_(sndbuf) {
+WebServer::WebServer(kj::Timer& timer, WebOptions options, WebProbes probes, AcceptOptions accept)
+    : timer_(timer), accept_(std::move(accept)) {
   kj::HttpHeaderTable::Builder builder;
   const kj::HttpHeaderId origin = builder.add("Origin");
   const kj::HttpHeaderId cache_control = builder.add("Cache-Control");
   const kj::HttpHeaderId nosniff = builder.add("X-Content-Type-Options");
   table_ = builder.build();
   service_ = kj::heap<Service>(*table_, origin, cache_control, nosniff, std::move(options), std::move(probes),
-                               kj::mv(bootstrap));
+                               accept_);
   http_ = kj::heap<kj::HttpServer>(timer_, *table_, *service_);
   connections_ = kj::heap<kj::TaskSet>(log_ended);
 }
@@ -170,11 +170,10 @@ kj::Promise<void> WebServer::accept_loop(kj::ConnectionReceiver& listener) {
   return listener.accept()
       .then(
           [this](kj::Own<kj::AsyncIoStream> stream) {
-            if (sndbuf_ > 0) stream->setsockopt(SOL_SOCKET, SO_SNDBUF, &sndbuf_, sizeof sndbuf_);
-            const int one = 1;
-            stream->setsockopt(IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-            stream->setsockopt(SOL_SOCKET, SO_KEEPALIVE, &one, sizeof one);
-            connections_->add(http_->listenHttp(kj::mv(stream)));
+            // The handshake (with TLS) runs in the connection's task, not in the accept loop.
+            connections_->add(prepare_accepted(kj::mv(stream), accept_).then([this](kj::Own<kj::AsyncIoStream> s) {
+              return http_->listenHttp(kj::mv(s));
+            }));
             return kj::Promise<void>(kj::READY_NOW);
           },
           [this](kj::Exception&& e) {  // e.g. out of descriptors: back off, keep serving

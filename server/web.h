@@ -19,6 +19,8 @@
 #include <kj/async-io.h>
 #include <kj/compat/http.h>
 
+#include "server/connection.h"
+
 namespace palpate::server {
 
 struct WebOptions {
@@ -54,13 +56,12 @@ std::filesystem::path static_file_for(const std::filesystem::path& root, std::st
 // Content-Type for a file name by its extension (text/html, application/javascript, ...).
 const char* content_type_for(const std::filesystem::path& file);
 
-// Runs the web listener until the returned promise is dropped. Connections accepted
-// get TCP_NODELAY, SO_KEEPALIVE and SO_SNDBUF = sndbuf (0 keeps the system's), as on
-// the TCP listener.
+// Runs the web listener until the returned promise is dropped. Connections accepted are
+// prepared as on the TCP listener (prepare_accepted: socket options, TLS), and each
+// WebSocket RPC connection gets its own bootstrap (accept.bootstrap).
 class WebServer {
  public:
-  WebServer(kj::Timer& timer, WebOptions options, WebProbes probes, capnp::Capability::Client bootstrap,
-            int sndbuf);
+  WebServer(kj::Timer& timer, WebOptions options, WebProbes probes, AcceptOptions accept);
   ~WebServer();
   kj::Promise<void> listen(kj::ConnectionReceiver& listener);
 
@@ -68,7 +69,7 @@ class WebServer {
   class Service;
   kj::Promise<void> accept_loop(kj::ConnectionReceiver& listener);
   kj::Timer& timer_;
-  int sndbuf_;
+  AcceptOptions accept_;
   kj::Own<kj::HttpHeaderTable> table_;
   kj::Own<Service> service_;
   kj::Own<kj::HttpServer> http_;

@@ -41,6 +41,7 @@
 #include "protocol/palpate.capnp.h"
 #include "tests/e2e/open_session.h"
 #include "tests/e2e/server_process.h"
+#include "tests/e2e/ws_client.h"
 #include "tests/run_program.h"
 
 namespace {
@@ -1177,53 +1178,18 @@ TEST(ServerE2E, ProgramsPrintTheirUsageAndRefuseGarbage) {
 // The same protocol over WebSocket (palpate-server --http: /rpc).
 
 // Random bytes for the WebSocket handshake key and the client's frame masks.
-class Entropy final : public kj::EntropySource {
- public:
-  void generate(kj::ArrayPtr<kj::byte> buffer) override {
-    for (auto& b : buffer) b = static_cast<kj::byte>(rng_());
-  }
-
- private:
-  std::mt19937 rng_{std::random_device{}()};
-};
-
 // A Cap'n Proto client over ws://127.0.0.1:WEB/rpc with its own event loop (one per
-// thread), built from kj-http's WebSocket client and capnp's WebSocketMessageStream.
+// thread): tests/e2e/ws_client.h on it.
 struct WsClient {
-  explicit WsClient(const std::string& origin = "") : io(kj::setupAsyncIo()) {
-    kj::HttpHeaderTable::Builder builder;
-    const kj::HttpHeaderId origin_id = builder.add("Origin");
-    table = builder.build();
-    kj::HttpClientSettings settings;
-    settings.entropySource = entropy;
-    http = kj::newHttpClient(io.provider->getTimer(), *table, io.provider->getNetwork(), nullptr, settings);
-    kj::HttpHeaders headers(*table);
-    if (!origin.empty()) headers.set(origin_id, origin);
-    const std::string url = "http://127.0.0.1:" + std::to_string(g_server->web_port()) + "/rpc";
-    auto response = http->openWebSocket(url, headers).wait(io.waitScope);
-    status = response.statusCode;
-    if (!response.webSocketOrBody.is<kj::Own<kj::WebSocket>>()) return;
-    socket = kj::mv(response.webSocketOrBody.get<kj::Own<kj::WebSocket>>());
-    stream = kj::heap<capnp::WebSocketMessageStream>(*socket);
-    network = kj::heap<capnp::TwoPartyVatNetwork>(*stream, capnp::rpc::twoparty::Side::CLIENT);
-    rpc = kj::heap(capnp::makeRpcClient(*network));
-    capnp::MallocMessageBuilder vat;
-    auto host = vat.initRoot<capnp::rpc::twoparty::VatId>();
-    host.setSide(capnp::rpc::twoparty::Side::SERVER);
-    server = rpc->bootstrap(host).castAs<PalpateServer>();
-  }
+  explicit WsClient(const std::string& origin = "")
+      : io(kj::setupAsyncIo()), connection(io, g_server->web_port(), origin), status(connection.status),
+        server(connection.server) {}
   kj::WaitScope& ws() { return io.waitScope; }
   void pump(int ms) { io.provider->getTimer().afterDelay(ms * kj::MILLISECONDS).wait(ws()); }
 
   kj::AsyncIoContext io;
-  Entropy entropy;
-  kj::Own<kj::HttpHeaderTable> table;
-  kj::Own<kj::HttpClient> http;
+  palpate::test::WsRpcConnection connection;
   unsigned status = 0;  // of the upgrade: 101 when accepted
-  kj::Own<kj::WebSocket> socket;
-  kj::Own<capnp::WebSocketMessageStream> stream;
-  kj::Own<capnp::TwoPartyVatNetwork> network;
-  kj::Own<capnp::RpcSystem<capnp::rpc::twoparty::VatId>> rpc;
   PalpateServer::Client server = nullptr;
 };
 

@@ -60,14 +60,17 @@ class ServerProcess {
     stdout_fd_ = out[0];
     const auto first = line.substr(0, line.find('\n'));
     const auto colon = first.rfind(':');
-    const auto web = line.find("web on http://127.0.0.1:");
+    // "web on http://127.0.0.1:PORT/", or https:// with --tls-cert.
+    const std::string web_prefix = line.find("web on https://") != std::string::npos ? "web on https://127.0.0.1:"
+                                                                                      : "web on http://127.0.0.1:";
+    const auto web = line.find(web_prefix);
     if (first.find("listening on") == std::string::npos || colon == std::string::npos ||
         (http && web == std::string::npos)) {
       std::fprintf(stderr, "server did not start: '%s'\n", line.c_str());
       std::abort();
     }
     port_ = std::stoi(first.substr(colon + 1));
-    if (http) web_port_ = std::stoi(line.substr(web + std::string("web on http://127.0.0.1:").size()));
+    if (http) web_port_ = std::stoi(line.substr(web + web_prefix.size()));
     started_ = std::chrono::steady_clock::now();
   }
   ~ServerProcess() {
