@@ -1,22 +1,12 @@
 #include "clients/connect.h"
 
-#include <cerrno>
-#include <cstring>
-#include <fstream>
-#include <sstream>
+#include "cli/text_file.h"
+
 #include <stdexcept>
 
 namespace palpate::client {
 
 namespace {
-
-std::string read_file(const std::string& what, const std::string& file) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw std::invalid_argument(what + " " + file + ": cannot be read (" + std::strerror(errno) + ")");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
 
 // HOST of HOST:PORT (brackets of [v6] removed), or the whole when it has no port.
 std::string host_of(const std::string& address) {
@@ -38,7 +28,7 @@ capnp::ReaderOptions reader_options(uint64_t words) {
 }  // namespace
 
 std::string read_token_file(const std::string& file) {
-  std::string token = read_file("access token file", file);
+  std::string token = palpate::cli::read_text_file(file, "access token file");
   const auto first = token.find_first_not_of(" \t\r\n");
   const auto last = token.find_last_not_of(" \t\r\n");
   if (first == std::string::npos) throw std::invalid_argument("access token file " + file + ": it is empty");
@@ -59,7 +49,7 @@ void ServerConnection::connect(const ConnectOptions& options) {
   auto address = io_.provider->getNetwork().parseAddress(options.address, 7420).wait(io_.waitScope);
   stream_ = address->connect().wait(io_.waitScope);
   if (!options.tls_ca_file.empty()) {
-    const std::string pem = read_file("TLS CA file", options.tls_ca_file);
+    const std::string pem = palpate::cli::read_text_file(options.tls_ca_file, "TLS CA file");
     ca_ = kj::heap<kj::TlsCertificate>(kj::StringPtr(pem.c_str()));
     kj::TlsContext::Options tls_options;
     tls_options.trustedCertificates = kj::arrayPtr(ca_.get(), 1);

@@ -52,7 +52,7 @@ grep -q "listening on" "$LOG" || { echo "server did not start"; cat "$LOG"; exit
 if [[ "${1:-}" == "--viewer" ]]; then
   url=$(grep -o "http://[^ ]*" "$LOG" | head -1)
   echo "== the viewer of scenes/$SCENE.json: open $url in a browser"
-  echo "   (each page opens its own session; ?session=ID watches one, ?scene=NAME opens another scene;"
+  echo "   (each page opens its own session; ?session=ID watches one read-only, ?scene=NAME opens another scene;"
   echo "   Ctrl-C stops the server)"
   wait $SERVER_PID
   exit

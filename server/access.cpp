@@ -1,11 +1,11 @@
 #include "server/access.h"
 
+#include "cli/text_file.h"
+
 #include <sys/random.h>
 
 #include <cerrno>
 #include <cstring>
-#include <fstream>
-#include <sstream>
 #include <stdexcept>
 
 namespace palpate::server {
@@ -61,11 +61,7 @@ bool tokens_equal(std::string_view a, std::string_view b) {
 }
 
 std::string read_access_token(const std::filesystem::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw std::invalid_argument(file.string() + ": cannot be read (" + std::strerror(errno) + ")");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse_access_token(text.str(), file.string());
+  return parse_access_token(cli::read_text_file(file, "--access-token-file"), file.string());
 }
 
 std::string parse_access_token(std::string token, const std::string& file) {

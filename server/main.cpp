@@ -24,9 +24,7 @@
 #include <cstring>
 #include <thread>
 #include <filesystem>
-#include <fstream>
 #include <optional>
-#include <sstream>
 #include <string>
 
 #include <capnp/message.h>
@@ -36,6 +34,7 @@
 #include <spdlog/spdlog.h>
 
 #include "cli/arguments.h"
+#include "cli/text_file.h"
 #include "core/model.h"
 #include "server/agones.h"
 #include "server/connection.h"
@@ -291,15 +290,6 @@ bool is_loopback(const std::string& host) {
   return host == "localhost" || host == "::1" || host == "[::1]" || host.rfind("127.", 0) == 0;
 }
 
-// A file's whole text, or std::invalid_argument naming the option and the file.
-std::string read_text(const std::string& flag, const std::string& file) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw std::invalid_argument(flag + " " + file + ": cannot be read (" + std::strerror(errno) + ")");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -323,7 +313,8 @@ int main(int argc, char** argv) {
     if (args.tls_cert.empty() != args.tls_key.empty())
       throw std::invalid_argument("--tls-cert and --tls-key go together: give both or neither");
     if (!args.tls_cert.empty()) {
-      const std::string cert = read_text("--tls-cert", args.tls_cert), key = read_text("--tls-key", args.tls_key);
+      const std::string cert = palpate::cli::read_text_file(args.tls_cert, "--tls-cert"),
+                        key = palpate::cli::read_text_file(args.tls_key, "--tls-key");
       try {
         tls_keypair.emplace(kj::TlsKeypair{kj::TlsPrivateKey(key.c_str()), kj::TlsCertificate(cert.c_str())});
       } catch (const kj::Exception& e) {

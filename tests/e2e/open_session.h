@@ -4,10 +4,22 @@
 #include <vector>
 
 #include <kj/async.h>
+#include <kj/exception.h>
 
 #include "protocol/palpate.capnp.h"
 
 namespace palpate::test {
+
+// The error message of a failing call, or "" if it succeeded.
+template <class Request>
+std::string error_of(Request&& req, kj::WaitScope& ws) {
+  try {
+    req.send().wait(ws);
+  } catch (const kj::Exception& e) {
+    return e.getDescription().cStr();
+  }
+  return "";
+}
 
 // hertz_cube with overrides ("key=value"); rate_hz 0 is the server's rate.
 inline wire::Session::Client open_session(wire::PalpateServer::Client& server, kj::WaitScope& ws, bool headless,

@@ -219,12 +219,7 @@ struct Client {
   // The error message of a failing call, or "" if it succeeded.
   template <class Request>
   std::string error_of(Request&& req) {
-    try {
-      req.send().wait(ws());
-    } catch (const kj::Exception& e) {
-      return e.getDescription().cStr();
-    }
-    return "";
+    return palpate::test::error_of(std::forward<Request>(req), ws());
   }
 };
 

@@ -24,6 +24,7 @@
 #include <kj/timer.h>
 
 #include "clients/connect.h"
+#include "tests/e2e/open_session.h"
 #include "protocol/palpate.capnp.h"
 #include "tests/e2e/server_process.h"
 #include "tests/e2e/ws_client.h"
@@ -81,12 +82,7 @@ struct Client {
   // The error message of a failing call, or "" if it succeeded.
   template <class Request>
   std::string error_of(Request&& req) {
-    try {
-      req.send().wait(ws());
-    } catch (const kj::Exception& e) {
-      return e.getDescription().cStr();
-    }
-    return "";
+    return palpate::test::error_of(std::forward<Request>(req), ws());
   }
 
  private:

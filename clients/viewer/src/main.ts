@@ -2,30 +2,49 @@
 // over WebSocket RPC on the server that served the page, or attaches to a live one, and
 // draws what the frames carry.
 //
+// A session lives while a page (or client) in control of it stays connected: closing or
+// reloading the page that opened it ends it for everyone watching, unless a page opened
+// with its control link still holds it. So the page never reloads itself.
+//
 // URL parameters:
 //   scene=NAME     a scene of the server's --scene-dir (default: the server's default scene)
-//   session=ID     watch a live session instead of opening one (several viewers at once)
+//   session=ID     watch a live session read-only instead of opening one (several viewers
+//                  at once): frames and statistics, every command disabled. The watch link
+//                  a page shows.
+//   token=HEX      with session=ID: the session's control token, to command it as its
+//                  opener does (the control link the opener's page shows: whoever has it
+//                  controls the tool)
 //   headless=1     open a headless session: Step buttons advance it
-//   field=vonMises the display field (default displacementMagnitude)
+//   field=vonMises the display field (default displacementMagnitude); changing it on the
+//                  page subscribes again in place
 //   rate=HZ        frames per second asked of the server (default 30)
 //   fmax=N         the force slider's top (default 1.5 x the Hertz force at d = R/5)
 //   set=KEY=VALUE  a scene override, repeatable (like --set)
 //   subscribe=0    open (or attach) without subscribing to frames (benchmarks: a session
 //                  with no viewer)
+// and in the fragment (never sent to any server, and removed from the address bar at once):
+//   #access=TOKEN  the server's access token (palpate-server --access-token-file), presented
+//                  with PalpateServer.authenticate before anything else. The links the page
+//                  shows do not carry it: whoever follows them needs it too.
 // window.palpateViewer exposes the state and a few actions for scripts and tests.
 import { ForceDepthPlot, hertzForce } from "./plot";
 import { COLOUR_BAR_CSS, TissueView } from "./scene3d";
-import { type FieldName, type FrameData, type LoopStats, ViewerSession } from "./session";
+import { type FieldName, type FrameData, type LoopStats, type SessionInfo, ViewerSession, sessionEnded } from "./session";
 
 const params = new URLSearchParams(location.search);
+// The access token, read once from the fragment and then dropped from the address bar (and
+// the history entry), so that a shared screen or a copied address does not carry it.
+const accessToken = new URLSearchParams(location.hash.slice(1)).get("access") ?? undefined;
+if (accessToken !== undefined) history.replaceState(null, "", `${location.pathname}${location.search}`);
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
 const fmt = (x: number, digits = 4) => (Number.isFinite(x) ? x.toPrecision(digits) : "–");
 
 interface ViewerHooks {
-  state: "connecting" | "ready" | "error" | "closed";
+  state: "connecting" | "ready" | "error" | "closed" | "ended"; // ended: the session is gone
   error: string;
   frames: number;
   last: FrameData | null;
+  field: FieldName; // the display field subscribed
   fieldMax: number;
   session?: ViewerSession;
   setForce(newtons: number): Promise<number>;
@@ -40,6 +59,7 @@ const hooks: ViewerHooks = {
   error: "",
   frames: 0,
   last: null,
+  field: "displacementMagnitude",
   fieldMax: 0,
   setForce: () => Promise.reject(new Error("not connected")),
   step: () => Promise.reject(new Error("not connected")),
@@ -53,36 +73,110 @@ const hooks: ViewerHooks = {
 function fail(message: string): void {
   hooks.state = "error";
   hooks.error = message;
-  const status = $("status");
-  status.textContent = message;
-  status.classList.add("error");
+  $("status-text").textContent = message;
+  $("status").classList.add("error");
+}
+
+// The session is gone (its owner closed it or left, or the server stops): said in the
+// status area, and nothing is commanded any more.
+function ended(info: SessionInfo, why: string): void {
+  if (hooks.state === "ended") return;
+  hooks.state = "ended";
+  hooks.error = `Session ${info.sessionId} has ended: ${why}`;
+  $("status-text").textContent = hooks.error;
+  $("status").classList.add("ended");
+  enableCommands(info, false);
+}
+
+const message = (e: unknown) => (e instanceof Error ? e.message : String(e));
+
+// Every command control of the page: a read-only view, or an ended session, has none.
+function enableCommands(info: SessionInfo, control: boolean): void {
+  $<HTMLInputElement>("force").disabled = !control;
+  $<HTMLButtonElement>("pause").disabled = !control || info.headless;
+  $<HTMLButtonElement>("reset").disabled = !control;
+  for (const b of document.querySelectorAll<HTMLButtonElement>(".headless")) b.disabled = !control || !info.headless;
+  $<HTMLInputElement>("press-depth").disabled = !control;
+  $("drag-hint").style.display = control && info.freeGuide ? "" : "none";
+  $("read-only").hidden = control || hooks.state === "ended";
+}
+
+// Who this page is to the session, first in the status area: a view says so at all times.
+function showRole(info: SessionInfo, opened: boolean): void {
+  const role = $("role");
+  role.hidden = opened;
+  role.textContent = info.control ? `Controlling session ${info.sessionId}` : `Watching session ${info.sessionId} read-only`;
+  role.classList.toggle("read-only", !info.control);
+}
+
+// The links to this session. The watch link (?session=ID) gives a read-only view; the
+// control link (?session=ID&token=…) gives what the opener has, so only a page in control
+// shows it, apart and with a warning, and only the token's first digits are on screen (a
+// shared screen shows the page). Both open a new tab: leaving the opener's page would end
+// the session.
+function showShare(info: SessionInfo, controlToken: string, opened: boolean): void {
+  const base = `${location.origin}${location.pathname}`;
+  const link = (query: string, text: string) => {
+    const a = document.createElement("a");
+    a.href = `${base}${query}`;
+    a.target = "_blank";
+    a.rel = "noopener";
+    a.textContent = text;
+    return a;
+  };
+  const watch = `?session=${info.sessionId}`;
+  const share = $("share");
+  share.replaceChildren(
+    info.control ? `Session ${info.sessionId}. Watch link (read-only): ` : `Watching session ${info.sessionId} read-only. Watch link: `,
+    link(watch, watch),
+    opened ? ". The session ends when this page closes or reloads." : ".",
+    accessToken !== undefined ? " This server asks for its access token: add #access=… to a link you share." : "",
+  );
+  const control = $("control-link");
+  control.hidden = !controlToken;
+  if (!controlToken) return;
+  const query = `${watch}&token=${controlToken}`;
+  control.replaceChildren(
+    "Control link: ",
+    link(query, `${watch}&token=${controlToken.slice(0, 8)}…`),
+    " gives control of the tool: share only with whom you would hand the device.",
+  );
 }
 
 async function main(): Promise<void> {
   const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/rpc`;
   const attachTo = params.has("session") ? Number(params.get("session")) : undefined;
-  const field = (params.get("field") ?? "displacementMagnitude") as FieldName;
+  let field = (params.get("field") ?? "displacementMagnitude") as FieldName;
   const rateHz = Number(params.get("rate") ?? 30);
   const viewer = await ViewerSession.start(url, {
     scene: params.get("scene") ?? undefined,
     headless: params.get("headless") === "1",
     attachTo,
+    controlToken: params.get("token") ?? undefined,
+    accessToken,
     overrides: params.getAll("set"),
   });
   const info = viewer.info;
+  const opened = attachTo === undefined;
   hooks.session = viewer;
+  hooks.field = field;
   viewer.transport.onClose = (reason) => {
+    if (hooks.state === "ended") return; // the server said why already
     hooks.state = "closed";
     fail(`disconnected: ${reason}`);
   };
+  // A command or a read that failed: the session's end, said as such, or an error. The
+  // server says why a view's session ended in brackets ("… has ended (its owner closed it
+  // or left)"); a control reference's call after Session.close finds it "closed".
+  const failed = (e: unknown) =>
+    sessionEnded(e) ? ended(info, /has ended \(([^)]*)\)/.exec(message(e))?.[1] ?? "session closed") : fail(message(e));
 
   $("scene").textContent =
     `${info.sceneName}: ${info.particleCount} particles, ${info.headless ? "headless" : `${info.rateHz} Hz`}, ` +
     `tool radius ${fmt(1000 * info.radius, 3)} mm, E = ${fmt(info.youngModulus, 3)} Pa`;
-  $("share").innerHTML = `Session ${info.sessionId}. Others can watch it at <a href="?session=${info.sessionId}">?session=${info.sessionId}</a>.`;
-  for (const b of document.querySelectorAll<HTMLButtonElement>(".headless")) b.disabled = !info.headless;
-  $<HTMLButtonElement>("pause").disabled = info.headless;
-  $("drag-hint").style.display = info.freeGuide ? "" : "none";
+  showRole(info, opened);
+  showShare(info, viewer.controlToken, opened);
+  enableCommands(info, info.control);
   $<HTMLInputElement>("press-depth").value = fmt(1000 * 0.1 * info.radius, 2);
   $("bar").style.background = COLOUR_BAR_CSS;
   $<HTMLSelectElement>("field").value = field;
@@ -99,40 +193,39 @@ async function main(): Promise<void> {
     if (seq > 0) pending.push({ seq, sent });
   };
   const showForce = () => ($("force-value").textContent = `${fmt(Number(slider.value) * fmax, 3)} N`);
+  // A view's slider shows the force in effect, which others command.
+  const showCommanded = (newtons: number) => {
+    slider.value = String(Math.min(Math.max(newtons / fmax, 0), 1));
+    $("force-value").textContent = `${fmt(newtons, 3)} N`;
+  };
   slider.addEventListener("input", () => {
     showForce();
     const sent = performance.now();
-    viewer.setForce(Number(slider.value) * fmax).then((seq) => track(seq, sent), (e) => fail(String(e)));
+    viewer.setForce(Number(slider.value) * fmax).then((seq) => track(seq, sent), failed);
   });
   showForce();
+  // On a view, rejects (read-only) without sending and leaves the slider as it is.
   hooks.setForce = async (newtons: number) => {
-    slider.value = String(newtons / fmax);
-    showForce();
     const sent = performance.now();
     const seq = await viewer.setForce(newtons);
+    slider.value = String(newtons / fmax);
+    showForce();
     track(seq, sent);
     return seq;
   };
 
   let paused = false;
-  $("pause").addEventListener("click", async () => {
-    paused = !paused;
-    await (paused ? viewer.pause() : viewer.resume());
-    $("pause").textContent = paused ? "Resume" : "Pause";
+  $("pause").addEventListener("click", () => {
+    const pausing = !paused;
+    (pausing ? viewer.pause() : viewer.resume()).then(() => {
+      paused = pausing;
+      $("pause").textContent = paused ? "Resume" : "Pause";
+    }, failed);
   });
-  $("reset").addEventListener("click", async () => {
-    await viewer.reset();
-    plot.clear();
-  });
+  $("reset").addEventListener("click", () => viewer.reset().then(() => plot.clear(), failed));
   hooks.step = (n: number) => viewer.step(n);
-  $("step1").addEventListener("click", () => viewer.step(1).catch((e) => fail(String(e))));
-  $("step100").addEventListener("click", () => viewer.step(100).catch((e) => fail(String(e))));
-  $("field").addEventListener("change", () => {
-    const next = new URLSearchParams(location.search);
-    next.set("field", $<HTMLSelectElement>("field").value);
-    if (!next.has("session")) next.set("session", String(info.sessionId));
-    location.search = next.toString();  // a new subscription with the other field
-  });
+  $("step1").addEventListener("click", () => viewer.step(1).catch(failed));
+  $("step100").addEventListener("click", () => viewer.step(100).catch(failed));
 
   // Shift-drag on a free tool: position commands at the picked surface point, pressing
   // the chosen depth below it (the tool's centre R - depth above the point).
@@ -146,10 +239,10 @@ async function main(): Promise<void> {
     const target: [number, number, number] = [hit.x, hit.y, hit.z + info.radius - depth];
     for (let c = 0; c < 3; c++) target[c] = Math.min(Math.max(target[c], info.workspaceMin[c]), info.workspaceMax[c]);
     const sent = performance.now();
-    viewer.setPosition(target).then((seq) => track(seq, sent), (e) => fail(String(e)));
+    viewer.setPosition(target).then((seq) => track(seq, sent), failed);
   };
   canvas.addEventListener("pointerdown", (event) => {
-    if (!info.freeGuide || !event.shiftKey) return;
+    if (!info.control || hooks.state === "ended" || !info.freeGuide || !event.shiftKey) return;
     dragging = true;
     view.controls.enabled = false;
     canvas.setPointerCapture(event.pointerId);
@@ -177,10 +270,28 @@ async function main(): Promise<void> {
       if (latencies.length > 50) latencies.shift();
     }
   };
-  viewer.onDone = (reason) => fail(`the server ended the stream: ${reason}`);
+  viewer.onDone = (reason) => ended(info, reason);
   hooks.bytesReceived = () => viewer.transport.bytesReceived;
-  if (params.get("subscribe") !== "0") await viewer.subscribe(rateHz, field);
+  const subscribed = params.get("subscribe") !== "0";
+  if (subscribed) await viewer.subscribe(rateHz, field);
   else hooks.state = "ready";
+
+  // Another field: the same session, subscribed again in place. Reloading the page would
+  // end the session (the opener's connection holds it) and a view's too.
+  const fieldUnits = () => (field === "vonMises" ? { name: "von Mises stress (Pa)", scale: 1 } : { name: "displacement |u| (mm)", scale: 1000 });
+  let fieldUnit = fieldUnits();
+  $("field").addEventListener("change", () => {
+    field = $<HTMLSelectElement>("field").value as FieldName;
+    hooks.field = field;
+    fieldUnit = fieldUnits();
+    $("field-name").textContent = fieldUnit.name;
+    view.fieldRange = 0; // the colour bar starts over in the new field's units
+    newest = null;
+    const next = new URLSearchParams(location.search);
+    next.set("field", field);
+    history.replaceState(null, "", `?${next}`);
+    if (subscribed && hooks.state !== "ended") viewer.subscribe(rateHz, field).catch(failed);
+  });
 
   hooks.maxDisplacement = () => view.maxDisplacement();
   hooks.stats = () => viewer.stats();
@@ -202,7 +313,6 @@ async function main(): Promise<void> {
     return { drawn: drawn / (pixels.length / 4), colours: colours.size };
   };
 
-  const fieldUnit = field === "vonMises" ? { name: "von Mises stress (Pa)", scale: 1 } : { name: "displacement |u| (mm)", scale: 1000 };
   $("field-name").textContent = fieldUnit.name;
   const animate = () => {
     if (newest) {
@@ -218,14 +328,15 @@ async function main(): Promise<void> {
       $("contact").textContent = `${fmt(fz)} N (command ${fmt(frame.forceCommand)} N)`;
       $("hertz").textContent = `${fmt(hertzForce(frame.indentation, info.radius, info.youngModulus, info.poissonRatio))} N`;
       $("patch").textContent = String(frame.contactNodes.length);
-      $("status").textContent = frame.recoveries > 0 ? `${frame.recoveries} blow-up(s) recovered` : "live";
+      if (hooks.state !== "ended") $("status-text").textContent = frame.recoveries > 0 ? `${frame.recoveries} blow-up(s) recovered` : "live";
+      if (!info.control) showCommanded(frame.forceCommand);
       if (hooks.state === "connecting") hooks.state = "ready";
     }
     view.render();
     requestAnimationFrame(animate);
   };
   requestAnimationFrame(animate);
-  $("status").textContent = "waiting for frames…";
+  $("status-text").textContent = "waiting for frames…";
   if (info.headless) hooks.state = "ready";
 
   // The loop's health once a second, and this view's bandwidth.
@@ -244,7 +355,7 @@ async function main(): Promise<void> {
       bytes = 0;
       windowStart = performance.now();
     } catch (e) {
-      fail(String(e));
+      failed(e);
       return;
     }
     setTimeout(poll, 1000);
@@ -252,4 +363,4 @@ async function main(): Promise<void> {
   setTimeout(poll, 1000);
 }
 
-main().catch((e) => fail(`cannot start: ${e instanceof Error ? e.message : String(e)}`));
+main().catch((e) => fail(`cannot start: ${message(e)}`));

@@ -2,6 +2,11 @@
 // open or attach a session, subscribe to frames, send commands, read statistics. The
 // schema's classes come from capnp-es's compiler (build.mjs); frames are copied out of
 // the message into plain typed arrays at once, so nothing keeps a message alive.
+//
+// A session belongs to its opener (docs/protocol.md, "Security model"): openSession gives
+// the control capability and a control token; attach() without the token gives a
+// read-only view (subscribe, stats, status, info), with it a control reference. The
+// session lives only while a control reference does.
 import { Conn, utils } from "capnp-es";
 import { FrameSink, PalpateServer, Session, ToolGuide } from "palpate-schema";
 import { WebSocketTransport } from "./transport";
@@ -10,6 +15,7 @@ export type Vec3 = [number, number, number];
 
 export interface SessionInfo {
   sessionId: number;
+  control: boolean; // this page may command the session; false: a read-only view
   sceneName: string;
   particleCount: number;
   dt: number; // s
@@ -63,6 +69,20 @@ export interface LoopStats {
 
 const vec3 = (v: { x: number; y: number; z: number }): Vec3 => [v.x, v.y, v.z];
 
+// What a view is refused (the server refuses it too; refusing here says why without a
+// round trip, and reaches the page's scripts as a rejection).
+export class ReadOnlyError extends Error {
+  constructor(method: string, sessionId: number) {
+    super(`${method}: read-only: this page watches session ${sessionId} without control (open the session's control link to command it)`);
+    this.name = "ReadOnlyError";
+  }
+}
+
+// A call that failed because the session is gone (its owner closed it or left), as the
+// server words it for a view ("has ended") and for a control reference ("is closed").
+export const sessionEnded = (error: unknown): boolean =>
+  /has ended|session is closed/.test(error instanceof Error ? error.message : String(error));
+
 // A list's elements as a typed array: a copy of the bytes in place when they are aligned
 // for the element type (the normal case), else element by element.
 function copyList<T extends Float32Array | Uint32Array>(
@@ -85,69 +105,54 @@ function copyList<T extends Float32Array | Uint32Array>(
   return out;
 }
 
+type ServerClient = InstanceType<typeof PalpateServer.Client>;
+type SessionClient = InstanceType<typeof Session.Client>;
+type WireInfo = Awaited<ReturnType<ReturnType<ServerClient["attach"]>["promise"]>>["info"];
+type Opened = { session: SessionClient; info: WireInfo; controlToken: string };
+
+export interface StartOptions {
+  scene?: string; // a name under the server's --scene-dir (default: its default scene)
+  headless?: boolean;
+  attachTo?: number; // a live session's id: attach instead of opening one
+  controlToken?: string; // with attachTo: the session's control token (without: a read-only view)
+  accessToken?: string; // the server's access token (--access-token-file): authenticate first
+  overrides?: string[];
+}
+
 export class ViewerSession {
   private subscription: { cancel(): { promise(): Promise<unknown> } } | null = null;
+  // Bumped by every (un)subscribe: frames and done() of an earlier subscription, still on
+  // their way when it was cancelled, are dropped (a field change must not end the page).
+  private generation = 0;
+  // (Re)subscriptions one after the other, so that a quick second change cannot leave a
+  // subscription nobody cancels (capnp-es never releases it).
+  private subscribing: Promise<unknown> = Promise.resolve();
   onFrame: (frame: FrameData) => void = () => {};
   onDone: (reason: string) => void = () => {};
 
   private constructor(
     readonly transport: WebSocketTransport,
-    readonly server: InstanceType<typeof PalpateServer.Client>,
-    readonly session: InstanceType<typeof Session.Client>,
+    readonly server: ServerClient,
+    readonly session: SessionClient,
     readonly info: SessionInfo,
+    // The token that controls this session ("" on a view): openSession's for the opener,
+    // the one attach() accepted for a controller. Whoever has it commands the tool.
+    readonly controlToken: string,
   ) {}
 
-  // Connects to `url` and opens a session (scene: a name under the server's --scene-dir,
-  // or undefined for its default) or, with attachTo, attaches to a live one.
-  static async start(
-    url: string,
-    options: { scene?: string; headless?: boolean; attachTo?: number; overrides?: string[] },
-  ): Promise<ViewerSession> {
+  // Connects to `url` and opens a session or, with attachTo, attaches to a live one:
+  // read-only without controlToken, in control with it.
+  static async start(url: string, options: StartOptions): Promise<ViewerSession> {
     const transport = await WebSocketTransport.connect(url);
     const conn = new Conn(transport as never);
-    const server = conn.bootstrap(PalpateServer);
+    let server = conn.bootstrap(PalpateServer);
+    if (options.accessToken) {
+      const token = options.accessToken;
+      server = (await server.authenticate((p) => (p.accessToken = token)).promise()).server;
+    }
     const opened =
-      options.attachTo !== undefined
-        ? await server.attach((p) => (p.sessionId = options.attachTo!)).promise()
-        : await server
-            .openSession((p) => {
-              const r = p._initRequest();
-              if (options.scene) r.scene.name = options.scene;
-              else r.scene.serverDefault = true;
-              r.headless = !!options.headless;
-              const overrides = options.overrides ?? [];
-              if (overrides.length > 0) {
-                const list = r._initOverrides(overrides.length);
-                overrides.forEach((o, i) => list.set(i, o));
-              }
-            })
-            .promise();
-    const i = opened.info;
-    const info: SessionInfo = {
-      sessionId: i.sessionId,
-      sceneName: i.sceneName,
-      particleCount: i.particleCount,
-      dt: i.dt,
-      rateHz: i.rateHz,
-      headless: i.headless,
-      forceLimit: i.forceLimit,
-      restPositions: copyList(i.restPositions, Float32Array),
-      surfaceTriangles: copyList(i.surfaceTriangles, Uint32Array),
-      surfaceVertices: copyList(i.surfaceVertices, Uint32Array),
-      touchHeight: i.touchHeight,
-      radius: i.radius,
-      youngModulus: i.youngModulus,
-      poissonRatio: i.poissonRatio,
-      workspaceMin: vec3(i.workspaceMin),
-      workspaceMax: vec3(i.workspaceMax),
-      freeGuide: i.guide === ToolGuide.FREE,
-      reference: {
-        forces: Float64Array.from(i.referenceForces.toArray()),
-        indentation: Float64Array.from(i.referenceIndentation.toArray()),
-        uncertainty: Float64Array.from(i.referenceUncertainty.toArray()),
-      },
-    };
-    return new ViewerSession(transport, server, opened.session, info);
+      options.attachTo !== undefined ? await attach(server, options.attachTo, options.controlToken ?? "") : await open(server, options);
+    return new ViewerSession(transport, server, opened.session, decodeInfo(opened.info), opened.controlToken);
   }
 
   get surfaceOnly(): boolean {
@@ -156,13 +161,25 @@ export class ViewerSession {
 
   // Frames at up to rateHz: the tool and forces always; the body's positions and one
   // display field of its surface vertices (all particles when the body has no surface);
-  // the contact set.
-  async subscribe(rateHz: number, field: FieldName): Promise<void> {
-    await this.unsubscribe();
+  // the contact set. Replaces the current subscription, if any (cancelled first).
+  subscribe(rateHz: number, field: FieldName): Promise<void> {
+    const next = this.subscribing.then(() => this.resubscribe(rateHz, field));
+    this.subscribing = next.catch(() => {});
+    return next;
+  }
+
+  private async resubscribe(rateHz: number, field: FieldName): Promise<void> {
+    await this.cancelSubscription();
+    const mine = ++this.generation;
+    const current = () => mine === this.generation;
     const decode = (frame: Parameters<typeof decodeFrame>[0]) => decodeFrame(frame, field, this.transport.lastMessageBytes);
     const sink = new FrameSink.Server({
-      frame: async (params) => this.onFrame(decode(params.frame)),
-      done: async (params) => this.onDone(params.reason),
+      frame: async (params) => {
+        if (current()) this.onFrame(decode(params.frame));
+      },
+      done: async (params) => {
+        if (current()) this.onDone(params.reason);
+      },
     });
     const result = await this.session
       .subscribe((p) => {
@@ -180,18 +197,33 @@ export class ViewerSession {
     this.subscription = result.subscription;
   }
 
-  async unsubscribe(): Promise<void> {
+  unsubscribe(): Promise<void> {
+    const next = this.subscribing.then(() => this.cancelSubscription());
+    this.subscribing = next.catch(() => {});
+    return next;
+  }
+
+  private async cancelSubscription(): Promise<void> {
+    this.generation++; // its done("subscription cancelled") is ours, not the session's end
     // capnp-es never releases capabilities: cancel explicitly.
-    if (this.subscription) await this.subscription.cancel().promise();
+    const subscription = this.subscription;
     this.subscription = null;
+    if (subscription) await subscription.cancel().promise();
+  }
+
+  // Commands: refused on a read-only view without sending anything.
+  private requireControl(method: string): void {
+    if (!this.info.control) throw new ReadOnlyError(method, this.info.sessionId);
   }
 
   async setForce(newtons: number): Promise<number> {
+    this.requireControl("setForce");
     const r = await this.session.setForce((p) => (p.newtons = newtons)).promise();
     return Number(r.seq);
   }
 
   async setPosition(x: Vec3): Promise<number> {
+    this.requireControl("setPosition");
     const r = await this.session
       .setPosition((p) => {
         const v = p._initPosition();
@@ -202,17 +234,21 @@ export class ViewerSession {
   }
 
   async pause(): Promise<void> {
+    this.requireControl("pause");
     await this.session.pause().promise();
   }
   async resume(): Promise<void> {
+    this.requireControl("resume");
     await this.session.resume().promise();
   }
   async reset(): Promise<void> {
+    this.requireControl("reset");
     await this.session.reset().promise();
   }
 
   // Headless sessions: n ticks; subscribers get the last frame too.
   async step(n: number): Promise<FrameData> {
+    this.requireControl("step");
     const r = await this.session
       .step((p) => {
         p.n = n;
@@ -240,9 +276,67 @@ export class ViewerSession {
   }
 
   async close(): Promise<void> {
+    this.requireControl("close");
     await this.unsubscribe();
     await this.session.close().promise();
   }
+}
+
+// openSession: the scene by name (or the server's default), the owner's capability and token.
+async function open(server: ServerClient, options: StartOptions): Promise<Opened> {
+  const r = await server
+    .openSession((p) => {
+      const request = p._initRequest();
+      if (options.scene) request.scene.name = options.scene;
+      else request.scene.serverDefault = true;
+      request.headless = !!options.headless;
+      const overrides = options.overrides ?? [];
+      if (overrides.length > 0) {
+        const list = request._initOverrides(overrides.length);
+        overrides.forEach((o, i) => list.set(i, o));
+      }
+    })
+    .promise();
+  return { session: r.session, info: r.info, controlToken: r.controlToken };
+}
+
+// attach: a read-only view with an empty token, a control reference with the session's.
+async function attach(server: ServerClient, sessionId: number, controlToken: string): Promise<Opened> {
+  const r = await server
+    .attach((p) => {
+      p.sessionId = sessionId;
+      p.controlToken = controlToken;
+    })
+    .promise();
+  return { session: r.session, info: r.info, controlToken: r.info.control ? controlToken : "" };
+}
+
+function decodeInfo(i: WireInfo): SessionInfo {
+  return {
+    sessionId: i.sessionId,
+    control: i.control,
+    sceneName: i.sceneName,
+    particleCount: i.particleCount,
+    dt: i.dt,
+    rateHz: i.rateHz,
+    headless: i.headless,
+    forceLimit: i.forceLimit,
+    restPositions: copyList(i.restPositions, Float32Array),
+    surfaceTriangles: copyList(i.surfaceTriangles, Uint32Array),
+    surfaceVertices: copyList(i.surfaceVertices, Uint32Array),
+    touchHeight: i.touchHeight,
+    radius: i.radius,
+    youngModulus: i.youngModulus,
+    poissonRatio: i.poissonRatio,
+    workspaceMin: vec3(i.workspaceMin),
+    workspaceMax: vec3(i.workspaceMax),
+    freeGuide: i.guide === ToolGuide.FREE,
+    reference: {
+      forces: Float64Array.from(i.referenceForces.toArray()),
+      indentation: Float64Array.from(i.referenceIndentation.toArray()),
+      uncertainty: Float64Array.from(i.referenceUncertainty.toArray()),
+    },
+  };
 }
 
 type WireFrame = Parameters<NonNullable<ConstructorParameters<typeof FrameSink.Server>[0]["frame"]>>[0]["frame"];
