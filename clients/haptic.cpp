@@ -12,6 +12,8 @@
 
 #include <kj/debug.h>
 
+#include "protocol/local_model_force.h"
+
 namespace palpate::haptic {
 
 namespace {
@@ -59,26 +61,11 @@ LocalModel local_model_of(wire::LocalModel::Reader m) {
 
 double norm(const V3& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
 
-// docs/protocol.md (P.0), clipped to the valid radius and saturated at the device's force.
+// docs/protocol.md (P.0), the server's formula (protocol/local_model_force.h).
 V3 render(const LocalModel& model, const V3& x, double max_force) {
-  V3 f = model.force;
-  if (model.valid_radius > 0 && model.stiffness_tick >= 0) {
-    V3 d = sub(x, model.origin);
-    const double length = norm(d);
-    if (length > model.valid_radius) {
-      const double scale = model.valid_radius / length;
-      for (double& c : d) c *= scale;
-    }
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) f[i] += model.stiffness[3 * i + j] * d[j];
-  }
-  if (max_force > 0) {
-    const double magnitude = norm(f);
-    if (magnitude > max_force) {
-      const double scale = max_force / magnitude;
-      for (double& c : f) c *= scale;
-    }
-  }
+  V3 f;
+  protocol::local_model_force(model.origin.data(), model.force.data(), model.stiffness.data(), model.valid_radius,
+                              model.stiffness_tick >= 0, x.data(), max_force, f.data());
   return f;
 }
 

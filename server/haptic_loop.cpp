@@ -8,27 +8,20 @@
 #include <algorithm>
 #include <cmath>
 
+#include "protocol/local_model_force.h"
 #include "server/deadlines.h"
 
 namespace palpate::server {
 
-bool saturate(Vec3& f, double max_force) {
-  const double length = f.norm();
-  if (!(max_force > 0.0 && length > max_force)) return false;
-  f *= max_force / length;
-  return true;
-}
+bool saturate(Vec3& f, double max_force) { return protocol::saturate_force(f.data(), max_force); }
 
-// docs/protocol.md (P.0).
+// docs/protocol.md (P.0), the formula the clients render with too (protocol/local_model_force.h).
 Vec3 render_at(const LocalModel& model, const Vec3& x, double max_force, bool* saturated) {
-  Vec3 f = model.force;
-  if (model.valid_radius > 0.0 && model.stiffness_tick >= 0) {
-    Vec3 d = x - model.origin;
-    const double length = d.norm();
-    if (length > model.valid_radius) d *= model.valid_radius / length;
-    f += model.stiffness * d;
-  }
-  const bool clipped = saturate(f, max_force);
+  const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> stiffness = model.stiffness;
+  Vec3 f;
+  const bool clipped = protocol::local_model_force(model.origin.data(), model.force.data(), stiffness.data(),
+                                                   model.valid_radius, model.stiffness_tick >= 0, x.data(), max_force,
+                                                   f.data());
   if (saturated != nullptr) *saturated = clipped;
   return f;
 }
