@@ -160,7 +160,8 @@ TEST(Security, AReadOnlyViewCannotCommandAndChangesNothing) {
   auto step = s.session.stepRequest();
   step.setN(10);
   step.send().wait(owner.ws());
-  const auto before = s.session.statusRequest().send().wait(owner.ws()).getStatus();
+  const auto before_response = s.session.statusRequest().send().wait(owner.ws());  // owns what the reader reads
+  const auto before = before_response.getStatus();
   const int64_t tick = before.getTick();
   const double force = before.getForceCommand();
 
@@ -208,7 +209,8 @@ TEST(Security, AReadOnlyViewCannotCommandAndChangesNothing) {
   }
 
   // Nothing changed: the owner's session is where it was, open, and still obeys its owner.
-  const auto after = s.session.statusRequest().send().wait(owner.ws()).getStatus();
+  const auto after_response = s.session.statusRequest().send().wait(owner.ws());
+  const auto after = after_response.getStatus();
   EXPECT_EQ(after.getTick(), tick);
   EXPECT_EQ(after.getForceCommand(), force);
   EXPECT_FALSE(after.getClosed());
@@ -575,8 +577,8 @@ TEST(Security, OverloadNeverStarvesControl) {
   std::vector<Opened> sessions;
   for (int k = 0; k < 6; ++k) sessions.push_back(open(c, /*headless=*/false, 2000.0, "18"));
   c.pump(1000);
-  auto stats0 = sessions[0].session.statsRequest().send().wait(c.ws()).getStats();
-  if (!stats0.getRealtimePriority()) GTEST_SKIP() << "the loops were not granted SCHED_FIFO";
+  const auto stats0 = sessions[0].session.statsRequest().send().wait(c.ws());
+  if (!stats0.getStats().getRealtimePriority()) GTEST_SKIP() << "the loops were not granted SCHED_FIFO";
 
   std::vector<double> stats_ms, health_ms, close_ms;
   for (int k = 0; k < 20; ++k) {
@@ -600,9 +602,9 @@ TEST(Security, OverloadNeverStarvesControl) {
   }
   uint64_t misses = 0, yields = 0;
   for (auto& s : sessions) {
-    auto st = s.session.statsRequest().send().wait(c.ws()).getStats();
-    misses += st.getDeadlineMisses();
-    yields += st.getWatchdogYields();
+    const auto response = s.session.statsRequest().send().wait(c.ws());
+    misses += response.getStats().getDeadlineMisses();
+    yields += response.getStats().getWatchdogYields();
   }
   for (auto& s : sessions) {
     const auto t0 = Clock::now();
