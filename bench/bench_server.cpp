@@ -32,6 +32,7 @@
 
 #include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "clients/haptic.h"
 #include "protocol/palpate.capnp.h"
 
 namespace {
@@ -276,12 +277,8 @@ void churn(const std::string& address, uint32_t session_id, const std::atomic<bo
   }
 }
 
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::ceil(q * v.size())) - (q > 0 ? 1 : 0));
-  return v[k];
-}
+// Nearest-rank percentiles: the clients' (clients/haptic.h), one definition for the project.
+using palpate::haptic::percentile;
 
 }  // namespace
 
