@@ -14,7 +14,7 @@ under 1 % (a shared machine's neighbours make single runs miss: every run is pri
     scripts/capacity.py --build build                      # the six real-time scenes, ~6 min
     scripts/capacity.py --build build --scenes hertz_cube_haptic --seconds 10 --repeats 5
 
-Prints one line per run and a Markdown table (README.md, "Capacity").
+Prints one line per run and a Markdown table (docs/deployment.md, "Capacity: sessions per core").
 """
 import argparse
 import json

@@ -8,7 +8,7 @@ packages=(
   capnproto libcapnp-dev
   libspdlog-dev libgtest-dev libbenchmark-dev
   nlohmann-json3-dev          # scene files: JSON parsing with field paths in error messages
-  libsuitesparse-dev          # CHOLMOD: sparse Cholesky of the quasi-static FEM solve (the finite-cube reference)
+  libsuitesparse-dev          # CHOLMOD: the model build's consistent-integration solve (core) and the quasi-static FEM solve (the finite-block reference)
   libopenblas0-serial         # optimised BLAS for CHOLMOD's supernodal factorisation (4x faster than the reference BLAS)
   python3-matplotlib python3-numpy   # plots in docs/ (glue only)
   clang libclang-rt-14-dev    # fuzz/: libFuzzer (libclang_rt.fuzzer) for Debian's clang 14 (test.sh --sanitize)

@@ -11,7 +11,7 @@
 //     its rate the pings stop, Agones marks the GameServer Unhealthy and replaces it; they
 //     resume when the judgement is ok again;
 //   - /shutdown, once, when the server stops (main.cpp: after the sessions were closed).
-// docs/protocol.md, "Agones"; README.md, "Sessions on Kubernetes with Agones".
+// docs/protocol.md, "Agones"; docs/deployment.md, "Sessions on Kubernetes with Agones".
 #include <functional>
 #include <string>
 

@@ -113,8 +113,8 @@ loop, or headless stepping on request. Once it accepts connections it prints one
                        --agones-health-seconds while every real-time session holds its
                        rate (the /healthz judgement; the pings stop while one does not, so
                        Agones replaces the server), and POST /shutdown on SIGINT/SIGTERM
-                       after the sessions were closed (README.md, "Sessions on Kubernetes
-                       with Agones")
+                       after the sessions were closed (docs/deployment.md, "Sessions on
+                       Kubernetes with Agones")
   --agones-port PORT   the sidecar's REST port, [1, 65535] (default: AGONES_SDK_HTTP_PORT,
                        else 9358)
   --agones-health-seconds S
