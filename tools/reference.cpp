@@ -26,7 +26,7 @@ namespace {
 const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
   --scene FILE          scene file; its box, material, fixed faces and indenter are used
   --forces F1,F2,...    forces in N (default: the scene's verify.forces, or the Hertz
-                        depths 0.01 ... 0.1 m)
+                        depths d/R = 0.02 ... 0.2)
   --levels N1,N2,...    nodes per edge of the graded lattices, coarse to fine
                         (default 17,25,33,41; at least three)
   --first-spacing S     first spacing (m) of the 21-per-edge member of the family (default 0.025)

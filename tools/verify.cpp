@@ -32,7 +32,7 @@ compares the indentation d with Hertz theory.
   --scene FILE        scene file (JSON), e.g. scenes/hertz_cube.json
   --per-edge N        override body.distribution.per_edge
   --forces F1,F2,...  force sweep in N (default: the scene's verify.forces, or the
-                      loads of Hertz depths 0.01 ... 0.1 m)
+                      Hertz loads of depths d/R = 0.02 ... 0.2)
   --set KEY=VALUE     override a scene field by its dotted path (repeatable),
                       e.g. --set integrator.type=implicit_euler
   --json              print one JSON summary on stdout (progress stays on stderr)
@@ -65,7 +65,11 @@ is overridden), so it stays over the site.
 Indentation d: travel of the indenter below the height at which it touches the
 undeformed surface (the highest particle under the tool's (x, y)); with the sphere centred
 between lattice particles d includes the strain-free sinking between them. Errors: (d_sim - d_ref) / d_ref; the L2 error
-is ||d_sim - d_ref|| / ||d_ref|| over the sweep.
+is ||d_sim - d_ref|| / ||d_ref|| over the sweep. A value that does not exist (no reference,
+or no finite-layer solution with --surface-radius) prints "-" (null in --json).
+Exit status: 0 when every force came to rest; 1 when the scene cannot be read or built (the
+message names the file, the field and the reason); 2 for a wrong argument; 3 when a force's
+row is not ok (its status: "not at rest" within the step limit, or "diverged").
 )";
 
 }  // namespace
@@ -248,12 +252,13 @@ int main(int argc, char** argv) {
       return std::string(text);
     };
     for (const tools::SweepRow& r : rows)
-      std::printf("%10.3f %10.5f %10.5f %10.5f %10s %8.1f%% %8.1f%% %9s %8ld %9.2f  %s\n", r.force, r.d_sim,
-                  r.d_hertz, r.d_layer, cell(r.d_ref, "%.5f").c_str(), 100 * (r.d_sim - r.d_hertz) / r.d_hertz,
-                  100 * (r.d_sim - r.d_layer) / r.d_layer,
+      std::printf("%10.3f %10.5f %10.5f %10s %10s %8.1f%% %9s %9s %8ld %9.2f  %s\n", r.force, r.d_sim, r.d_hertz,
+                  cell(r.d_layer, "%.5f").c_str(), cell(r.d_ref, "%.5f").c_str(),
+                  100 * (r.d_sim - r.d_hertz) / r.d_hertz, cell(100 * (r.d_sim - r.d_layer) / r.d_layer, "%.1f%%").c_str(),
                   cell(100 * (r.d_sim - r.d_ref) / r.d_ref, "%.1f%%").c_str(), r.steps, r.wall_seconds,
                   r.status.c_str());
-    std::printf("L2 error against Hertz: %.2f %%, against finite-layer Hertz: %.2f %%", 100 * l2_hertz, 100 * l2_layer);
+    std::printf("L2 error against Hertz: %.2f %%", 100 * l2_hertz);
+    if (std::isfinite(l2_layer)) std::printf(", against finite-layer Hertz: %.2f %%", 100 * l2_layer);
     if (std::isfinite(l2_reference)) std::printf(", against the converged reference: %.2f %%", 100 * l2_reference);
     std::printf("\n");
     // The method shows in the levels: lattices have nodes per edge, tetrahedral meshes none.
