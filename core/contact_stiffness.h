@@ -174,7 +174,7 @@ class ContactStiffness {
   double touch_depth(const CarriedState& state, const Vec3& nearest) const;
   // evaluate() without the check for an unchanged state.
   LocalContactModel evaluate_anew(const Model& model, const CarriedState& state);
-  Workspace tangent_;  // the tangent's linearisation point (solid.h): tangent_F / tangent_S_or_R and the
+  Workspace tangent_;  // the tangent's linearisation point (solid.h): tangent_F / tangent_law_factor and the
                        // force loops' scratch (threads) are used
   std::vector<uint8_t> movable_;        // n: 1 = free particle, 0 = fixed
   std::vector<Mat3> diagonal_;          // n: D_i, the reference tangent's 3x3 diagonal block

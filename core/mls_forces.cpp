@@ -166,9 +166,9 @@ inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volum
 
 // First Piola stress P of a particle with Lame parameters lambda, mu (its own:
 // Model::particle_lambda, particle_mu) (elastic + volume term) and its energy density.
-// S_out receives what the tangent needs: S (St Venant-Kirchhoff), R (corotational) or
+// law_factor_out receives what the tangent needs: S (St Venant-Kirchhoff), R (corotational) or
 // F^-T (neo-Hookean); the linear law needs nothing (I).
-inline double piola_stress(const Model& m, const Mat3& F, double lambda, double mu, Mat3& P, Mat3* S_out = nullptr) {
+inline double piola_stress(const Model& m, const Mat3& F, double lambda, double mu, Mat3& P, Mat3* law_factor_out = nullptr) {
   Mat3 S = Mat3::Identity();
   double psi = 0;
   switch (m.law) {
@@ -192,11 +192,11 @@ inline double piola_stress(const Model& m, const Mat3& F, double lambda, double 
     psi += 0.5 * m.volume_stiffness * (J - 1) * (J - 1);
     P += m.volume_stiffness * (J - 1) * C;
   }
-  if (S_out) *S_out = S;
+  if (law_factor_out) *law_factor_out = S;
   return psi;
 }
 
-// dP of piola_stress at (F, S) along dF, S what piola_stress returned in S_out.
+// dP of piola_stress at (F, S) along dF, S what piola_stress returned in law_factor_out.
 inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, const Mat3& dF, double lambda,
                                double mu) {
   Mat3 dP;
@@ -257,13 +257,13 @@ void internal_forces_per_particle(const Model& m, const double* x, double* f) {
 }
 
 // mls_force_differential one particle at a time (with hourglass control).
-void force_differential_per_particle(const Model& m, const double* tangent_F, const double* tangent_S_or_R,
+void force_differential_per_particle(const Model& m, const double* tangent_F, const double* tangent_law_factor,
                                      const double* dx, double* df) {
   const double* D = m.gradient_weight.data();
   const int* idx = m.neighbor_index.data();
   for (int i = 0; i < m.particle_count; ++i) {
     const Eigen::Map<const Mat3> F(tangent_F + 9 * static_cast<size_t>(i));
-    const Eigen::Map<const Mat3> S(tangent_S_or_R + 9 * static_cast<size_t>(i));
+    const Eigen::Map<const Mat3> S(tangent_law_factor + 9 * static_cast<size_t>(i));
     // dF = sum_j (dx_j - dx_i) d_j^T (the rest correction is constant).
     Mat3 dF = Mat3::Zero();
     const Vec3 dxi = Eigen::Map<const Vec3>(dx + 3 * i);
@@ -566,7 +566,7 @@ PALPATE_INLINE void add_weighted_volume_term(const Model& m, const Mat3Lanes& F,
 // St Venant-Kirchhoff S = lambda tr(E) I + 2 mu E, P = F S, plus the volume
 // term k_v (J - 1) cof F when volume_term. The volume v_i is folded into S.
 template <bool volume_term>
-PALPATE_INLINE void weighted_piola_stress(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
+PALPATE_INLINE void weighted_stvk_stress(const Model& m, const Mat3Lanes& F, const Lanes v, const Lanes lambda,
                                           const Lanes mu, Mat3Lanes& vP) {
   auto FtF = [&](int a, int b) { return F(0, a) * F(0, b) + F(1, a) * F(1, b) + F(2, a) * F(2, b); };
   const Lanes E00 = 0.5 * FtF(0, 0) - 0.5, E11 = 0.5 * FtF(1, 1) - 0.5, E22 = 0.5 * FtF(2, 2) - 0.5;
@@ -601,11 +601,11 @@ PALPATE_INLINE void add_volume_term_differential(const Model& m, const Mat3Lanes
   for (int k = 0; k < 9; ++k) dP.m[k] += m.volume_stiffness * (C_dF * C.m[k] + (J - 1.0) * dC.m[k]);
 }
 
-// v_i dP_i, the differential of weighted_piola_stress at (F_i, S_i) along dF_i:
+// v_i dP_i, the differential of weighted_stvk_stress at (F_i, S_i) along dF_i:
 // dE = sym(F^T dF), dS = lambda tr(dE) I + 2 mu dE, dP = dF S + F dS, and for the
 // volume term k_v [(cof F : dF) cof F + (J - 1) d cof F].
 template <bool volume_term>
-PALPATE_INLINE void weighted_piola_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& S, const Mat3Lanes& dF,
+PALPATE_INLINE void weighted_stvk_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& S, const Mat3Lanes& dF,
                                         const Lanes v, const Lanes lambda, const Lanes mu, Mat3Lanes& vdP) {
   auto FtdF = [&](int a, int b) { return F(0, a) * dF(0, b) + F(1, a) * dF(1, b) + F(2, a) * dF(2, b); };
   const Lanes dE00 = FtdF(0, 0), dE11 = FtdF(1, 1), dE22 = FtdF(2, 2);
@@ -1104,7 +1104,7 @@ PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const doub
       else if (m.law == MaterialLaw::linear)
         weighted_linear_stress<volume_term>(m, F[g], v[g], lambda[g], mu[g], vP[g]);
       else
-        weighted_piola_stress<volume_term>(m, F[g], v[g], lambda[g], mu[g], vP[g]);
+        weighted_stvk_stress<volume_term>(m, F[g], v[g], lambda[g], mu[g], vP[g]);
     }
   }
   PALPATE_UNROLL
@@ -1137,7 +1137,7 @@ void internal_forces_blocked(const Model& m, int b_begin, int b_end, const doubl
 // control's energy is quadratic: its terms (1.9a) are those of the forces with (dx, dF).
 template <class Layout, bool volume_term, bool hourglass, int K>
 void force_differentials_blocked(const Model& m, int b_begin, int b_end, const double* tangent_F,
-                                 const double* tangent_S_or_R, const double* const* dx, double* const* df) {
+                                 const double* tangent_law_factor, const double* const* dx, double* const* df) {
   const int n = m.particle_count;
   for (int b = b_begin; b < b_end; ++b) {
     const Block& block = m.blocks[b];
@@ -1152,7 +1152,7 @@ void force_differentials_blocked(const Model& m, int b_begin, int b_end, const d
     for (int q = 0; q < K; ++q) add_gradient<Layout, hourglass>(begin, end, dx[q], i, dF[q], hg, &sums[q]);
     Mat3Lanes F, S, vdP[K];
     gather_matrices(tangent_F, i, F);
-    gather_matrices(tangent_S_or_R, i, S);
+    gather_matrices(tangent_law_factor, i, S);
     const Lanes v = load(block.volume), lambda = load(block.lame_lambda), mu = load(block.lame_mu);
     if (m.law == MaterialLaw::neo_hookean) {
       PALPATE_UNROLL
@@ -1164,7 +1164,7 @@ void force_differentials_blocked(const Model& m, int b_begin, int b_end, const d
       for (int q = 0; q < K; ++q) weighted_linear_differential<volume_term>(m, F, dF[q], v, lambda, mu, vdP[q]);
     } else {
       PALPATE_UNROLL
-      for (int q = 0; q < K; ++q) weighted_piola_differential<volume_term>(m, F, S, dF[q], v, lambda, mu, vdP[q]);
+      for (int q = 0; q < K; ++q) weighted_stvk_differential<volume_term>(m, F, S, dF[q], v, lambda, mu, vdP[q]);
     }
     const int lanes = std::min(kLanes, n - kLanes * b);
     PALPATE_UNROLL
@@ -1308,7 +1308,7 @@ void scatter_in_parallel(const Model& m, double* f, WorkerThreads& threads, cons
 }
 
 void linearize_particles(const Model& m, const Points& x, int i_begin, int i_end, std::vector<double>& tangent_F,
-                         std::vector<double>& tangent_S_or_R);
+                         std::vector<double>& tangent_law_factor);
 
 }  // namespace
 
@@ -1421,54 +1421,54 @@ double mls_strain_energy(const Model& m, const Points& x) {
 }
 
 void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent_F,
-                      std::vector<double>& tangent_S_or_R) {
+                      std::vector<double>& tangent_law_factor) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   tangent_F.resize(9 * static_cast<size_t>(m.particle_count));
-  tangent_S_or_R.resize(9 * static_cast<size_t>(m.particle_count));
-  linearize_particles(m, x, 0, m.particle_count, tangent_F, tangent_S_or_R);
+  tangent_law_factor.resize(9 * static_cast<size_t>(m.particle_count));
+  linearize_particles(m, x, 0, m.particle_count, tangent_F, tangent_law_factor);
 }
 
 void mls_linearize(const Model& m, const Points& x, std::vector<double>& tangent_F,
-                   std::vector<double>& tangent_S_or_R, WorkerThreads& threads) {
-  if (threads.count() == 1) return mls_linearize(m, x, tangent_F, tangent_S_or_R);
+                   std::vector<double>& tangent_law_factor, WorkerThreads& threads) {
+  if (threads.count() == 1) return mls_linearize(m, x, tangent_F, tangent_law_factor);
   tangent_F.resize(9 * static_cast<size_t>(m.particle_count));
-  tangent_S_or_R.resize(9 * static_cast<size_t>(m.particle_count));
+  tangent_law_factor.resize(9 * static_cast<size_t>(m.particle_count));
   const int T = threads.count(), n = m.particle_count;
   threads.pool->run([&](int t) {
     linearize_particles(m, x, static_cast<int>(int64_t{n} * t / T), static_cast<int>(int64_t{n} * (t + 1) / T),
-                        tangent_F, tangent_S_or_R);
+                        tangent_F, tangent_law_factor);
   });
 }
 
 namespace {
 void linearize_particles(const Model& m, const Points& x, int i_begin, int i_end, std::vector<double>& tangent_F,
-                         std::vector<double>& tangent_S_or_R) {
+                         std::vector<double>& tangent_law_factor) {
   for (int i = i_begin; i < i_end; ++i) {
     const Mat3 F = gradient_at(m, x.data(), i);
     Mat3 P, S;
     piola_stress(m, F, m.particle_lambda[i], m.particle_mu[i], P, &S);  // S, or R (corotational), or F^-T (neo-Hookean)
-    Eigen::Map<Mat3> F_out(&tangent_F[9 * static_cast<size_t>(i)]), S_out(&tangent_S_or_R[9 * static_cast<size_t>(i)]);
+    Eigen::Map<Mat3> F_out(&tangent_F[9 * static_cast<size_t>(i)]), law_factor_out(&tangent_law_factor[9 * static_cast<size_t>(i)]);
     F_out = F;
-    S_out = S;
+    law_factor_out = S;
   }
 }
 }  // namespace
 
 void mls_force_differential(const Model& m, const std::vector<double>& tangent_F,
-                            const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df) {
+                            const std::vector<double>& tangent_law_factor, const Points& dx, Points& df) {
   WorkerThreads scratch;  // allocates the loop's rows: the stepping code passes its own
-  mls_force_differential(m, tangent_F, tangent_S_or_R, dx, df, scratch);
+  mls_force_differential(m, tangent_F, tangent_law_factor, dx, df, scratch);
 }
 
 void mls_force_differential(const Model& m, const std::vector<double>& tangent_F,
-                            const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df,
+                            const std::vector<double>& tangent_law_factor, const Points& dx, Points& df,
                             WorkerThreads& threads) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   if (!use_blocks(m)) {
     df.setZero();
-    return force_differential_per_particle(m, tangent_F.data(), tangent_S_or_R.data(), dx.data(), df.data());
+    return force_differential_per_particle(m, tangent_F.data(), tangent_law_factor.data(), dx.data(), df.data());
   }
-  const double *F = tangent_F.data(), *S = tangent_S_or_R.data();
+  const double *F = tangent_F.data(), *S = tangent_law_factor.data();
   with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
     if (threads.count() == 1)
       return loop_on_rows(m, threads, dx.data(), df.data(), [&](int b_begin, int b_end, const double* dx_rows, double* out) {
@@ -1485,13 +1485,13 @@ void mls_force_differential(const Model& m, const std::vector<double>& tangent_F
 }
 
 void mls_force_differentials(const Model& m, const std::vector<double>& tangent_F,
-                             const std::vector<double>& tangent_S_or_R, int count, const Points* const* dx,
+                             const std::vector<double>& tangent_law_factor, int count, const Points* const* dx,
                              Points* const* df, WorkerThreads& scratch) {
   assert(m.solid == SolidKind::mls && "an MLS function called on a hex-FEM model");
   assert(count >= 0 && count <= kMaxDifferentials);
   if (count == 0) return;
   if (!use_blocks(m)) {  // the per-particle reference loop: one product after the other
-    for (int q = 0; q < count; ++q) mls_force_differential(m, tangent_F, tangent_S_or_R, *dx[q], *df[q], scratch);
+    for (int q = 0; q < count; ++q) mls_force_differential(m, tangent_F, tangent_law_factor, *dx[q], *df[q], scratch);
     return;
   }
   const int n = m.particle_count;
@@ -1507,7 +1507,7 @@ void mls_force_differentials(const Model& m, const std::vector<double>& tangent_
     std::fill(out[q], out[q] + stride, 0.0);
   }
   const int blocks = static_cast<int>(m.blocks.size());
-  const double *F = tangent_F.data(), *S = tangent_S_or_R.data();
+  const double *F = tangent_F.data(), *S = tangent_law_factor.data();
   with_blocked_variant(m, [&]<bool volume_term, bool hourglass>() {
     switch (count) {
       case 1: force_differentials_blocked<Rows, volume_term, hourglass, 1>(m, 0, blocks, F, S, in, out); break;

@@ -1,8 +1,9 @@
 #pragma once
 // Internal forces of the MLS solid with nodal integration (Müller et al. 2004,
-// Aras et al.): deformation gradient, Green strain, St Venant-Kirchhoff stress,
-// energy-consistent forces, the optional volume-restoring term and the optional
-// hourglass control. Forces are the exact negative gradient of mls_strain_energy().
+// Aras et al.): deformation gradient, the material law's stress (St Venant-Kirchhoff, the
+// paper's; corotational; linear; neo-Hookean: Model::law), energy-consistent forces, the
+// optional volume-restoring term and the optional hourglass control. Forces are the exact
+// negative gradient of mls_strain_energy().
 #include <vector>
 
 #include "core/model.h"
@@ -29,7 +30,8 @@ void mls_internal_forces(const Model& model, const Points& x, Points& f);
 // bit. Other counts differ from it by the order of the sums (round-off).
 void mls_internal_forces(const Model& model, const Points& x, Points& f, WorkerThreads& threads);
 
-// U(x) = sum_i v_i [ 1/2 E:S + k_v/2 (det F - 1)^2 ] + hourglass energy, J.
+// U(x) = sum_i v_i [ psi(F_i) + k_v/2 (det F_i - 1)^2 ] + hourglass energy, J, psi the law's energy
+// density (St Venant-Kirchhoff: 1/2 E:S).
 double mls_strain_energy(const Model& model, const Points& x);
 
 // Deformation gradient of particle i: F_i = sum_j (x_j - x_i) d_j^T + C_i.
@@ -44,18 +46,19 @@ double first_piola_stress(const Model& model, const Mat3& F, Mat3& P);
 // forces use them (core/stress.h reads the per-particle stress through it).
 double particle_first_piola_stress(const Model& model, const Mat3& F, int i, Mat3& P);
 
-// Tangent stiffness, matrix-free. mls_linearize caches F_i and S_i (9 x n
-// each; R_i for the corotational law, F_i^-T for the neo-Hookean) at x; mls_force_differential then gives df = (df/dx) dx = -K dx.
+// Tangent stiffness, matrix-free. mls_linearize caches F_i and the law's factor (9 x n
+// each: S_i for St Venant-Kirchhoff and linear, R_i for the corotational law, F_i^-T for the
+// neo-Hookean) at x; mls_force_differential then gives df = (df/dx) dx = -K dx.
 void mls_linearize(const Model& model, const Points& x, std::vector<double>& tangent_F,
-                      std::vector<double>& tangent_S_or_R);
+                      std::vector<double>& tangent_law_factor);
 void mls_force_differential(const Model& model, const std::vector<double>& tangent_F,
-                        const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df);
+                        const std::vector<double>& tangent_law_factor, const Points& dx, Points& df);
 // The same on threads.count() threads, split as mls_internal_forces (the linearisation by
 // particle ranges: no sums, bit-identical to one thread).
 void mls_linearize(const Model& model, const Points& x, std::vector<double>& tangent_F,
-                   std::vector<double>& tangent_S_or_R, WorkerThreads& threads);
+                   std::vector<double>& tangent_law_factor, WorkerThreads& threads);
 void mls_force_differential(const Model& model, const std::vector<double>& tangent_F,
-                            const std::vector<double>& tangent_S_or_R, const Points& dx, Points& df,
+                            const std::vector<double>& tangent_law_factor, const Points& dx, Points& df,
                             WorkerThreads& threads);
 
 // The tangent product for up to kMaxDifferentials directions in one sweep over the neighbour
@@ -67,7 +70,7 @@ void mls_force_differential(const Model& model, const std::vector<double>& tange
 // arrays, 3 x n.
 inline constexpr int kMaxDifferentials = 3;
 void mls_force_differentials(const Model& model, const std::vector<double>& tangent_F,
-                             const std::vector<double>& tangent_S_or_R, int count, const Points* const* dx,
+                             const std::vector<double>& tangent_law_factor, int count, const Points* const* dx,
                              Points* const* df, WorkerThreads& scratch);
 
 // Floating-point operations of one mls_internal_forces call at positions x (for the

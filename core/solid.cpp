@@ -28,20 +28,20 @@ void linearize_elastic(const Model& model, const Points& x, Workspace& work) {
   if (model.solid == SolidKind::hex_fem)
     hex_linearize(model.hex, x, work.tangent_F);  // element rotations (hex FEM)
   else
-    mls_linearize(model, x, work.tangent_F, work.tangent_S_or_R, work.threads);
+    mls_linearize(model, x, work.tangent_F, work.tangent_law_factor, work.threads);
 }
 
 void elastic_force_differential(const Model& model, Workspace& work, const Points& dx, Points& df) {
   if (model.solid == SolidKind::hex_fem)
     hex_force_differential(model.hex, work.tangent_F, dx, df);
   else
-    mls_force_differential(model, work.tangent_F, work.tangent_S_or_R, dx, df, work.threads);
+    mls_force_differential(model, work.tangent_F, work.tangent_law_factor, dx, df, work.threads);
 }
 
 void elastic_force_differentials(const Model& model, Workspace& work, int count, const Points* const* dx,
                                  Points* const* df) {
   if (model.solid == SolidKind::mls && work.threads.count() == 1)
-    return mls_force_differentials(model, work.tangent_F, work.tangent_S_or_R, count, dx, df, work.threads);
+    return mls_force_differentials(model, work.tangent_F, work.tangent_law_factor, count, dx, df, work.threads);
   for (int q = 0; q < count; ++q) elastic_force_differential(model, work, *dx[q], *df[q]);
 }
 

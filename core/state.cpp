@@ -28,7 +28,7 @@ State make_state(const Model& model, const Options& opt) {
   w.v0.resize(3, n);
   for (Points* p : {&w.cg_r, &w.cg_p, &w.cg_z, &w.cg_Ap, &w.rhs, &w.dv}) p->resize(3, n);
   w.tangent_F.resize(9 * static_cast<size_t>(n));
-  w.tangent_S_or_R.resize(9 * static_cast<size_t>(n));
+  w.tangent_law_factor.resize(9 * static_cast<size_t>(n));
   w.gap.reserve(n);
   w.normal.resize(3, n);
   w.candidate_slot.assign(n, -1);

@@ -155,8 +155,9 @@ struct Workspace {
   // The linearisation point of the tangent stiffness, written by the free motion and
   // read by the contact response of the same step (solid.h), 9 x n each (column-major
   // 3 x 3 per particle): the deformation gradient F_i (hex FEM: the element rotations)
-  // and the law's second factor, S_i (St Venant-Kirchhoff, linear) or R_i (corotational).
-  std::vector<double> tangent_F, tangent_S_or_R;
+  // and the law's factor its differential needs, S_i (St Venant-Kirchhoff, linear), R_i
+  // (corotational) or F_i^-T (neo-Hookean).
+  std::vector<double> tangent_F, tangent_law_factor;
   Points contact_response;             // 3 x n: A^-1 J^T (nu - p), implicit Euler's contact response (contact.cpp)
   ComplianceCache compliance;          // read across steps (see ComplianceCache)
   // Contact
