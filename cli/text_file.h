@@ -20,4 +20,11 @@ inline std::string read_text_file(const std::filesystem::path& file, const std::
   return text;
 }
 
+// `text` without the white space (spaces, tabs, line ends) around it.
+inline std::string trim_white_space(const std::string& text) {
+  const auto first = text.find_first_not_of(" \t\r\n");
+  if (first == std::string::npos) return "";
+  return text.substr(first, text.find_last_not_of(" \t\r\n") - first + 1);
+}
+
 }  // namespace palpate::cli

@@ -28,11 +28,9 @@ capnp::ReaderOptions reader_options(uint64_t words) {
 }  // namespace
 
 std::string read_token_file(const std::string& file) {
-  std::string token = palpate::cli::read_text_file(file, "access token file");
-  const auto first = token.find_first_not_of(" \t\r\n");
-  const auto last = token.find_last_not_of(" \t\r\n");
-  if (first == std::string::npos) throw std::invalid_argument("access token file " + file + ": it is empty");
-  return token.substr(first, last - first + 1);
+  const std::string token = palpate::cli::trim_white_space(palpate::cli::read_text_file(file, "access token file"));
+  if (token.empty()) throw std::invalid_argument("access token file " + file + ": it is empty");
+  return token;
 }
 
 ServerConnection::ServerConnection(const ConnectOptions& options)

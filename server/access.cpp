@@ -64,10 +64,8 @@ std::string read_access_token(const std::filesystem::path& file) {
   return parse_access_token(cli::read_text_file(file, "--access-token-file"), file.string());
 }
 
-std::string parse_access_token(std::string token, const std::string& file) {
-  const auto first = token.find_first_not_of(" \t\r\n");
-  const auto last = token.find_last_not_of(" \t\r\n");
-  token = first == std::string::npos ? "" : token.substr(first, last - first + 1);
+std::string parse_access_token(const std::string& text, const std::string& file) {
+  const std::string token = cli::trim_white_space(text);
   for (const char c : token)
     if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f)
       throw std::invalid_argument(file + ": the access token holds white space or a control character; "

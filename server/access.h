@@ -40,7 +40,7 @@ inline constexpr size_t kMinAccessTokenChars = 32;
 // shorter than kMinAccessTokenChars, or holds white space or control characters inside.
 std::string read_access_token(const std::filesystem::path& file);
 // The same on the file's text (`file` names it in messages).
-std::string parse_access_token(std::string text, const std::string& file);
+std::string parse_access_token(const std::string& text, const std::string& file);
 
 // What one client connection (TCP or WebSocket) has used of its limits. Shared by the
 // connection's bootstrap capabilities and the sessions it opened (which give their

@@ -52,8 +52,7 @@ inline kj::Promise<kj::Own<kj::AsyncIoStream>> prepare_accepted(kj::Own<kj::Asyn
 class RpcConnection {
  public:
   // TCP: the stream carries capnp's segment framing.
-  RpcConnection(kj::Own<kj::AsyncIoStream> stream, capnp::Capability::Client bootstrap,
-                size_t max_message_bytes = kDefaultMaxMessageBytes)
+  RpcConnection(kj::Own<kj::AsyncIoStream> stream, capnp::Capability::Client bootstrap, size_t max_message_bytes)
       : stream_(kj::mv(stream)),
         network_(kj::heap<capnp::TwoPartyVatNetwork>(*stream_, capnp::rpc::twoparty::Side::SERVER,
                                                      rpc_reader_options(max_message_bytes))),
@@ -63,8 +62,7 @@ class RpcConnection {
   // WebSocket: each capnp message is one binary message of at most
   // kj::WebSocket::SUGGESTED_MAX_MESSAGE_SIZE (1 MiB, enforced by kj when receiving;
   // a larger one ends the connection), and of at most max_message_bytes when smaller.
-  RpcConnection(kj::Own<kj::WebSocket> websocket, capnp::Capability::Client bootstrap,
-                size_t max_message_bytes = kDefaultMaxMessageBytes)
+  RpcConnection(kj::Own<kj::WebSocket> websocket, capnp::Capability::Client bootstrap, size_t max_message_bytes)
       : websocket_(kj::mv(websocket)),
         messages_(kj::heap<capnp::WebSocketMessageStream>(*websocket_)),
         network_(kj::heap<capnp::TwoPartyVatNetwork>(*messages_, capnp::rpc::twoparty::Side::SERVER,

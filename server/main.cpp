@@ -379,16 +379,21 @@ int main(int argc, char** argv) {
       tls_options.acceptTimeout = 10 * kj::SECONDS;
       tls = kj::heap<kj::TlsContext>(kj::mv(tls_options));
     }
-    for (const auto& [flag, host] : {std::pair<const char*, std::string>{"--listen", args.host},
-                                     {"--http", args.http ? args.http->host : std::string("127.0.0.1")}})
-      if (!tls && !is_loopback(host))
+    // A listener beyond loopback without TLS or without an access token is warned about.
+    auto warn_if_exposed = [&](const char* flag, const std::string& host) {
+      if (is_loopback(host)) return;
+      if (!tls)
         spdlog::warn("{} {}: listening beyond loopback WITHOUT TLS: control tokens, access tokens and every force "
                      "command cross the network in clear text; give --tls-cert and --tls-key, or put a "
                      "TLS-terminating proxy in front (docs/protocol.md, \"Security model\")",
                      flag, host);
-    if (args.options.access_token.empty() && (!is_loopback(args.host) || (args.http && !is_loopback(args.http->host))))
-      spdlog::warn("no --access-token-file: anyone who reaches the port may open sessions (docs/protocol.md, "
-                   "\"Security model\")");
+      if (args.options.access_token.empty())
+        spdlog::warn("{} {}: no --access-token-file: anyone who reaches the port may open sessions "
+                     "(docs/protocol.md, \"Security model\")",
+                     flag, host);
+    };
+    warn_if_exposed("--listen", args.host);
+    if (args.http) warn_if_exposed("--http", args.http->host);
     palpate::server::AcceptOptions accept;
     accept.sndbuf = args.sndbuf;
     accept.max_message_bytes = args.max_message_bytes;

@@ -249,7 +249,6 @@ class SessionImpl final : public wire::Session::Server {
 
   void stop() { sim_->stop(); }
   wire::Session::Client self() { return thisCap(); }
-  uint32_t id() const { return id_; }
   // Gives the opener's connection its slot back (--max-sessions-per-connection), once.
   void release_slot() {
     if (holds_slot_) --opener_->sessions_open;

@@ -308,7 +308,6 @@ TEST(Security, AViewDoesNotKeepASessionAliveAfterItsOwnerLeaves) {
   int frames = 0;
   std::string done;
   Session::Client view = nullptr;
-  kj::Own<kj::Promise<void>> none;
   {
     Client owner(server);
     Opened s = open(owner, /*headless=*/false);
