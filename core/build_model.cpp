@@ -417,12 +417,13 @@ void set_boundary_and_indenter(Model& m, const Scene& scene, const NodeCloud& cl
 
 }  // namespace
 
-Model build_model(const Scene& scene) {
+Model build_model(const Scene& scene) { return build_model(scene, make_node_cloud(scene)); }
+
+Model build_model(const Scene& scene, const NodeCloud& cloud) {
   Model m;
   m.name = scene.name;
   m.source = scene.source;
   m.distribution = scene.distribution.type;
-  const NodeCloud cloud = make_node_cloud(scene);
   m.particle_count = static_cast<int>(cloud.positions.cols());
   m.rest_position = cloud.positions;
   m.mesh_tetrahedra = cloud.mesh_tetrahedra;

@@ -310,9 +310,9 @@ void check_one_part(const RawMesh& raw, const std::vector<std::array<int64_t, 4>
               ", line " + std::to_string(raw.tet_line[first_largest]) + "); mesh one volume, or remove the other parts");
 }
 
-// The faces of exactly one tetrahedron, each ordered so that its normal
-// (x_b - x_a) x (x_c - x_a) points away from the tetrahedron's fourth node (outward).
-std::vector<std::array<int, 3>> boundary_faces(const Points& X, const std::vector<std::array<int, 4>>& tets) {
+}  // namespace
+
+std::vector<std::array<int, 3>> tetrahedra_boundary_faces(const Points& X, const std::vector<std::array<int, 4>>& tets) {
   struct Face {
     std::array<int, 3> key;  // sorted
     std::array<int, 3> v;    // as taken from the tetrahedron
@@ -346,6 +346,8 @@ std::vector<std::array<int, 3>> boundary_faces(const Points& X, const std::vecto
   }
   return out;
 }
+
+namespace {
 
 // Checks the tetrahedra, drops mid-edge nodes, lumps the volumes. Messages name
 // `node_file` or `element_file` (the same file for gmsh).
@@ -457,7 +459,7 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
   }
   mesh.tetrahedron_region = raw.tet_region;
   mesh.tetrahedron_region.resize(raw.tets.size(), 0);
-  mesh.boundary_faces = boundary_faces(mesh.positions, mesh.tetrahedra);
+  mesh.boundary_faces = tetrahedra_boundary_faces(mesh.positions, mesh.tetrahedra);
   // The boundary must enclose what the tetrahedra hold (divergence theorem: sum over the
   // outward faces of (x . n) A / 3): tetrahedra that interpenetrate without sharing a face,
   // or fold over one another, hold more volume than their boundary encloses.

@@ -118,6 +118,10 @@ const std::vector<int>& surface_group_nodes(const TetMesh& mesh, const std::file
 int64_t physical_group_tag(const TetMesh& mesh, const std::filesystem::path& file, int dimension,
                            std::string_view name);
 
+// The faces of exactly one of `tets`, each ordered so that its normal (x_b - x_a) x (x_c - x_a)
+// points away from its tetrahedron's fourth node (outward): TetMesh::boundary_faces.
+std::vector<std::array<int, 3>> tetrahedra_boundary_faces(const Points& X, const std::vector<std::array<int, 4>>& tets);
+
 // gmsh .msh (4.1 or 2.2 ASCII).
 TetMesh read_gmsh(const std::filesystem::path& file, int64_t max_nodes = kMaxMeshNodes);
 // TetGen: `node_file` (.node) and the .ele next to it.

@@ -140,5 +140,9 @@ struct Model {
 // with an actionable message on a scene that cannot be built, or whose options
 // (options_of(scene)) the model cannot run (check_options, time_step.h).
 Model build_model(const Scene& scene);
+// The same from the scene's cloud made already (make_node_cloud, or refined_mesh_cloud
+// toward another site: a refocus), so that the caller keeps its tetrahedra.
+struct NodeCloud;
+Model build_model(const Scene& scene, const NodeCloud& cloud);
 
 }  // namespace palpate

@@ -1,6 +1,7 @@
 #include "core/node_cloud.h"
 
 #include "core/mesh_reader.h"
+#include "core/mesh_refinement.h"
 
 #include <algorithm>
 #include <cmath>
@@ -208,7 +209,7 @@ NodeCloud mesh_node_cloud(const Scene& scene) {
     return s.str();
   };
   const std::string name = scene.distribution.mesh_file.string();
-  if (!scene.box_given) return mesh_cloud(mesh);  // a body of any shape
+  if (!scene.box_given) return refined_mesh_cloud(scene, mesh, tool_centre(scene, mesh));  // a body of any shape
   if ((lo - box.min).cwiseAbs().maxCoeff() > tolerance || (hi - box.max).cwiseAbs().maxCoeff() > tolerance)
     throw SceneError(scene.source, field,
                      "the mesh " + name + " spans " + text(lo) + " ... " + text(hi) + ", not /body/box " +
@@ -221,7 +222,29 @@ NodeCloud mesh_node_cloud(const Scene& scene) {
       << " m^3 (a hole, an overlap or another shape): the mesh must fill /body/box";
     throw SceneError(scene.source, field, s.str());
   }
-  return mesh_cloud(mesh);
+  return refined_mesh_cloud(scene, mesh, tool_centre(scene, mesh));
+}
+
+Vec3 tool_centre(const Scene& scene, const TetMesh& mesh) {
+  if (scene.indenter.position_given) return scene.indenter.position;
+  // build_model's default: over the centre of the body's bounding box, above its top.
+  const Vec3 lo = mesh.positions.rowwise().minCoeff(), hi = mesh.positions.rowwise().maxCoeff();
+  return Vec3(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2] + scene.indenter.radius);
+}
+
+NodeCloud refined_mesh_cloud(const Scene& scene, const TetMesh& base, const Vec3& tool) {
+  const DistributionSpec& d = scene.distribution;
+  if (!d.refine.enabled()) return mesh_cloud(base);
+  MeshRefinement spec;
+  spec.focus = d.focus_given ? d.focus : nearest_boundary_point(base, tool);
+  spec.focus_size = d.refine.size;
+  spec.growth = d.refine.growth;
+  if (d.refine.max_size > 0) spec.max_size = d.refine.max_size;
+  try {
+    return mesh_cloud(refine_mesh(base, spec));
+  } catch (const std::invalid_argument& e) {
+    throw SceneError(scene.source, "/body/distribution/refine/size", e.what());
+  }
 }
 
 NodeCloud make_node_cloud(const Scene& scene) {

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/mesh_reader.h"
 #include "core/scene.h"
 #include "core/types.h"
 
@@ -68,6 +69,16 @@ NodeCloud load_node_list(const std::filesystem::path& file);
 // /body/distribution/file; without it the mesh may have any shape (a dome, a sphere).
 // Reader errors are std::runtime_error naming file and line.
 NodeCloud mesh_node_cloud(const Scene& scene);
+
+// The tool's centre a scene starts with: indenter.position, else over the centre of the
+// mesh's bounding box, one radius above its top (build_model places it there).
+Vec3 tool_centre(const Scene& scene, const TetMesh& mesh);
+// The cloud of a mesh distribution from its (already read and checked) base mesh: the base
+// itself, or with distribution.refine the base refined (core/mesh_refinement.h) toward
+// distribution.focus when given, else toward the point of the body's surface nearest `tool`
+// (the tool's centre, m). Throws SceneError at /body/distribution/refine/size when the
+// refinement passes the node limit.
+NodeCloud refined_mesh_cloud(const Scene& scene, const TetMesh& base, const Vec3& tool);
 
 // The cloud a scene names (grid, jittered_grid, graded_grid, node_file or mesh).
 NodeCloud make_node_cloud(const Scene& scene);

@@ -114,7 +114,9 @@ constexpr std::string_view kSceneKeys[] = {"name",     "model",   "body",       
 constexpr std::string_view kBodyKeys[] = {"box", "distribution"};
 constexpr std::string_view kBoxKeys[] = {"min", "max"};
 constexpr std::string_view kDistributionKeys[] = {"type",          "per_edge", "spacing",   "jitter", "seed",
-                                                  "first_spacing", "focus",    "node_file", "file"};
+                                                  "first_spacing", "focus",    "node_file", "file",
+                                                  "refine"};
+constexpr std::string_view kRefineKeys[] = {"size", "growth", "max_size"};
 constexpr std::string_view kMlsKeys[] = {"neighbors",   "max_neighbors", "support_factor", "support_rule",
                                          "integration", "volumes",       "hourglass",      "regularization"};
 constexpr std::string_view kHexFemKeys[] = {"formulation", "volumetric_integration"};
@@ -146,7 +148,8 @@ struct Section {
 };
 constexpr Section kSections[] = {
     {"", kSceneKeys},           {"/body", kBodyKeys},         {"/body/box", kBoxKeys},
-    {"/body/distribution", kDistributionKeys},                {"/mls", kMlsKeys},
+    {"/body/distribution", kDistributionKeys},                {"/body/distribution/refine", kRefineKeys},
+    {"/mls", kMlsKeys},
     {"/hex_fem", kHexFemKeys},  {"/material", kMaterialKeys}, {"/indenter", kIndenterKeys},
     {"/contact", kContactKeys}, {"/integrator", kIntegratorKeys},
     {"/verify", kVerifyKeys},   {"/verify/rest", kRestKeys},  {"/health", kHealthKeys},
@@ -441,6 +444,9 @@ void require_file(const Reader& r, const std::string& what, const std::string& n
   if (fs::is_directory(status)) r.fail(what + " '" + name + "' is a directory (resolved to " + file.string() + ")");
 }
 
+// read_distribution's mark for a refine object without a size (never left in a Scene).
+constexpr double kDeriveRefineSize = -1.0;
+
 void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base_dir, DistributionSpec& d) {
   r.object(kDistributionKeys);
   r["type"].get(d.type, "distribution type", kDistributions);
@@ -470,6 +476,15 @@ void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base
     }
   }
 
+  if (const Reader refine = r["refine"]; refine.present()) {
+    refine.object(kRefineKeys);
+    d.refine.size = kDeriveRefineSize;  // read_scene derives it when left out (a mesh only)
+    if (refine["size"].present()) refine["size"].get(d.refine.size, open_closed(0.0, 1e3));
+    refine["growth"].get(d.refine.growth, open_closed(1.0, 10.0));
+    refine["max_size"].get(d.refine.max_size, closed(0.0, 1e3));
+    if (d.refine.max_size > 0 && d.refine.max_size <= d.refine.size)
+      refine["max_size"].fail("must exceed size (else nothing is refined), or be 0 (no limit)");
+  }
   if (!node_file.empty()) d.node_file = resolve_file(node_file, base_dir);
   if (!mesh_file.empty()) d.mesh_file = resolve_file(mesh_file, base_dir);
   if (d.type == DistributionType::node_file) {
@@ -786,6 +801,11 @@ void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   read_verify(r["verify"], s.verify);
   read_health(r["health"], s.health);
   derive_scale_defaults(s);
+  // A refine object without a size: the spacing the scene asks for (as graded_grid's
+  // first_spacing); ignored unless the distribution is a mesh.
+  if (s.distribution.refine.size == kDeriveRefineSize)
+    s.distribution.refine.size =
+        s.distribution.type == DistributionType::mesh ? required_resolution(s).finest_spacing() : 0.0;
   if (s.distribution.type == DistributionType::graded_grid) {
     // Left out (0): the spacing the scene's sweep asks for (core/resolution.h).
     if (s.distribution.first_spacing == 0.0) s.distribution.first_spacing = required_resolution(s).finest_spacing();

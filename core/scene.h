@@ -94,6 +94,16 @@ struct DistributionSpec {
                                     // against the scene file's folder
   std::filesystem::path mesh_file;  // mesh: a tetrahedral mesh (.msh gmsh, .node + .ele TetGen), absolute
                                     // path resolved like node_file (JSON key "file"; core/mesh_reader.h)
+  // mesh: refined in-process toward the tool (core/mesh_refinement.h, JSON object "refine"):
+  // the file is then a coarse base mesh, refined toward `focus` when given, else toward the
+  // point of the body's surface nearest the tool, and refocused as the tool moves.
+  struct Refinement {
+    double size = 0.0;       // the mean tetrahedron edge at the focus, m (7.1); 0 = no refinement. An
+                             // object without it: the spacing the scene asks for (core/resolution.h)
+    double growth = 1.2;     // G > 1 of (7.1)
+    double max_size = 0.0;   // no refinement where (7.1) reaches it, m; 0 = no such limit
+    bool enabled() const { return size > 0.0; }
+  } refine;
 };
 
 struct MlsSpec {

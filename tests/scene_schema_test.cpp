@@ -134,6 +134,9 @@ const Field kFields[] = {
     SCENE_FIELD("/body/distribution/focus", distribution.focus, "[0.5, 0, 0]"),
     SCENE_FIELD("/body/distribution/node_file", distribution.node_file, R"("nodes.txt")"),
     SCENE_FIELD("/body/distribution/file", distribution.mesh_file, R"("cube.msh")"),
+    SCENE_FIELD("/body/distribution/refine/size", distribution.refine.size, "0.002"),
+    SCENE_FIELD("/body/distribution/refine/growth", distribution.refine.growth, "1.5"),
+    SCENE_FIELD("/body/distribution/refine/max_size", distribution.refine.max_size, "0.01"),
     SCENE_FIELD("/mls/neighbors", mls.neighbors, "26"),
     SCENE_FIELD("/mls/max_neighbors", mls.max_neighbors, "64"),
     SCENE_FIELD("/mls/support_factor", mls.support_factor, "1.5"),
@@ -193,7 +196,8 @@ const Field kFields[] = {
                                 contact, integrator, gravity, verify, health] = s;
   [[maybe_unused]] const auto& [min, max] = s.box;
   [[maybe_unused]] const auto& [type, per_edge, spacing, jitter, first_spacing, focus_given, focus, seed, node_file,
-                                mesh_file] = s.distribution;
+                                mesh_file, refine] = s.distribution;
+  [[maybe_unused]] const auto& [refine_size, refine_growth, refine_max_size] = s.distribution.refine;
   [[maybe_unused]] const auto& [neighbors, max_neighbors, support_factor, support_rule, integration, volumes, hourglass,
                                 regularization] = s.mls;
   [[maybe_unused]] const auto& [formulation, volumetric_integration] = s.hex_fem;
@@ -213,7 +217,9 @@ const Field kFields[] = {
 // Fields whose default is not a value a scene file could write: the source's stem,
 // "no file", the top face under the indenter, the indenter just touching the body.
 // Scene-file fields not (yet) on the wire: a wire scene leaves them at their defaults.
-const std::set<std::string> kFileOnlyFields = {};
+// The refinement that follows the tool refines a mesh file (wire scenes name no mesh file).
+const std::set<std::string> kFileOnlyFields = {"/body/distribution/refine/size", "/body/distribution/refine/growth",
+                                               "/body/distribution/refine/max_size"};
 // Wire fields that are parts of a file field: Scene.fixedRegions are the object elements
 // of the file's `fixed` (protocol/scene_wire.cpp merges them; FixedRegionsCrossTheWire).
 const std::map<std::string, std::string> kWirePartsOfFileFields = {{"/fixed_regions", "/fixed"}};
@@ -225,7 +231,8 @@ const std::set<std::string> kDerivedDefaults = {"/name", "/body/distribution/foc
                                                 "/contact/tolerance", "/verify/forces",
                                                 "/verify/rest/velocity_tolerance",
                                                 // from the sweep and the inclusions (core/resolution.h)
-                                                "/body/distribution/first_spacing"};
+                                                "/body/distribution/first_spacing",
+                                                "/body/distribution/refine/size"};
 
 // "pointer: expected vs actual" for every field where the scenes differ; empty when equal.
 std::string differences(const Scene& expected, const Scene& actual) {
@@ -331,9 +338,11 @@ void flatten(const json& value, const std::string& pointer, std::map<std::string
 // file field: a wire scene with every struct set and nothing else, encoded in full.
 std::map<std::string, json> wire_defaults() {
   json skeleton = json::object();
-  for (const std::string& path : scene_field_paths())
+  for (const std::string& path : scene_field_paths()) {
+    if (kFileOnlyFields.count(path)) continue;  // their objects are not on the wire either
     for (std::size_t slash = path.find('/', 1); slash != std::string::npos; slash = path.find('/', slash + 1))
       skeleton[json::json_pointer(path.substr(0, slash))] = json::object();
+  }
   capnp::MallocMessageBuilder message;
   auto scene = message.initRoot<wire::Scene>();
   scene_json_to_wire(skeleton.dump(), kTestSource, scene);

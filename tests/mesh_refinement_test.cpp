@@ -1,0 +1,226 @@
+// Local refinement of a tetrahedral mesh by longest-edge bisection (core/mesh_refinement.h):
+// judged by what any conforming refinement of the same body must satisfy (the volume, the
+// boundary's area and faces, each interior face shared by two tetrahedra of opposite
+// orientation), by the sizes it promised, and by its independence of anything but the base
+// and the focus.
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <random>
+
+#include "core/mesh_reader.h"
+#include "core/mesh_refinement.h"
+#include "core/node_cloud.h"
+#include "core/scene.h"
+
+namespace palpate {
+namespace {
+
+namespace fs = std::filesystem;
+const fs::path kBaseMesh = fs::path(PALPATE_SOURCE_DIR) / "scenes" / "meshes" / "palpation_block_base.msh";
+
+const TetMesh& base_mesh() {
+  static const TetMesh mesh = read_mesh(kBaseMesh);
+  return mesh;
+}
+
+double tet_volume(const Points& X, const std::array<int, 4>& t) {
+  const Vec3 a = X.col(t[0]);
+  return (X.col(t[1]) - a).dot((X.col(t[2]) - a).cross(X.col(t[3]) - a)) / 6.0;
+}
+
+MeshRefinement spec_at(double x, double y) {
+  MeshRefinement spec;
+  spec.focus = Vec3(x, y, 0.0);
+  spec.focus_size = 0.0012;
+  spec.growth = 1.2;
+  return spec;
+}
+
+TEST(MeshRefinement, KeepsTheBodyAndConforms) {
+  const TetMesh& base = base_mesh();
+  const TetMesh fine = refine_mesh(base, spec_at(0.0175, -0.01));
+  ASSERT_GT(fine.positions.cols(), base.positions.cols());
+  // The base's vertices keep their places and indices.
+  EXPECT_TRUE(fine.positions.leftCols(base.positions.cols()) == base.positions);
+  // Every tetrahedron positive; their volumes add up to the box's (0.1 x 0.1 x 0.05 m).
+  double total = 0;
+  for (const auto& t : fine.tetrahedra) {
+    const double v = tet_volume(fine.positions, t);
+    ASSERT_GT(v, 0.0);
+    total += v;
+  }
+  EXPECT_NEAR(total, 5e-4, 1e-12 * 5e-4);
+  EXPECT_NEAR(fine.total_volume, 5e-4, 1e-12 * 5e-4);
+  double lumped = 0;
+  for (double v : fine.nodal_volume) lumped += v;
+  EXPECT_NEAR(lumped, 5e-4, 1e-12 * 5e-4);
+  // Conforming: a face belongs to one tetrahedron (the boundary) or to two, which see it with
+  // opposite orientations; a hanging node would leave faces that match nothing inside.
+  std::map<std::array<int, 3>, std::vector<int>> faces;  // sorted face -> orientation signs
+  for (const auto& t : fine.tetrahedra)
+    for (int skip = 0; skip < 4; ++skip) {
+      std::array<int, 3> f{};
+      int k = 0;
+      for (int a = 0; a < 4; ++a)
+        if (a != skip) f[k++] = t[a];
+      // The orientation of the face seen from its tetrahedron: the parity of the sort.
+      int swaps = 0;
+      for (int i = 0; i < 3; ++i)
+        for (int j = i + 1; j < 3; ++j) swaps += f[i] > f[j];
+      std::sort(f.begin(), f.end());
+      faces[f].push_back((swaps + skip) % 2);
+    }
+  size_t boundary = 0;
+  double area = 0;
+  for (const auto& [f, signs] : faces) {
+    ASSERT_LE(signs.size(), 2u);
+    if (signs.size() == 2) {
+      EXPECT_NE(signs[0], signs[1]);
+      continue;
+    }
+    ++boundary;
+    const Vec3 a = fine.positions.col(f[0]), b = fine.positions.col(f[1]), c = fine.positions.col(f[2]);
+    area += 0.5 * (b - a).cross(c - a).norm();
+    // On one of the box's faces.
+    const bool on_box = (std::abs(a.x() - b.x()) + std::abs(a.x() - c.x()) == 0 && std::abs(std::abs(a.x()) - 0.05) < 1e-12) ||
+                        (std::abs(a.y() - b.y()) + std::abs(a.y() - c.y()) == 0 && std::abs(std::abs(a.y()) - 0.05) < 1e-12) ||
+                        (a.z() == b.z() && a.z() == c.z() && (a.z() == 0.0 || std::abs(a.z() + 0.05) < 1e-12));
+    EXPECT_TRUE(on_box) << "a boundary face off the box at (" << a.transpose() << ")";
+  }
+  EXPECT_EQ(boundary, fine.boundary_faces.size());
+  EXPECT_NEAR(area, 2 * 0.01 + 4 * 0.005, 1e-12);
+}
+
+TEST(MeshRefinement, ReachesTheAskedSizeOnlyNearTheFocus) {
+  const TetMesh& base = base_mesh();
+  const MeshRefinement spec = spec_at(-0.02, 0.03);
+  const TetMesh fine = refine_mesh(base, spec);
+  // Every tetrahedron's mean edge within (7.1) at its centroid; the tetrahedra at the focus
+  // near focus_size.
+  double nearest_mean = INFINITY, nearest_distance = INFINITY;
+  for (const auto& t : fine.tetrahedra) {
+    Vec3 centroid = Vec3::Zero();
+    double mean = 0;
+    for (int a = 0; a < 4; ++a) {
+      centroid += 0.25 * fine.positions.col(t[a]);
+      for (int b = a + 1; b < 4; ++b) mean += (fine.positions.col(t[a]) - fine.positions.col(t[b])).norm() / 6;
+    }
+    const double r = (centroid - spec.focus).norm();
+    ASSERT_LE(mean, refinement_size(spec, r) * (1 + 1e-12));
+    if (r < nearest_distance) {
+      nearest_distance = r;
+      nearest_mean = mean;
+    }
+  }
+  EXPECT_GT(nearest_mean, 0.25 * spec.focus_size);  // bisection halves edges at most once too often
+  // Without max_size (7.1) refines the far field too (the base's 15 mm tetrahedra at the
+  // bottom exceed h there); with it, the new vertices gather near the focus: (7.1) reaches
+  // 3 mm at r = 9 mm. The bisections that keep the mesh conforming (a neighbour's longest
+  // edge first) may run farther along the base's longer edges into the interior (up to 52 mm
+  // measured here, by a wall), but they are few (88 of 770 beyond 20 mm).
+  const Eigen::Index added = fine.positions.cols() - base.positions.cols();
+  MeshRefinement local = spec;
+  local.max_size = 0.003;
+  const TetMesh near = refine_mesh(base, local);
+  const Eigen::Index added_near = near.positions.cols() - base.positions.cols();
+  EXPECT_LT(2 * added_near, added);  // measured: 770 against 1895
+  int beyond = 0;
+  for (Eigen::Index i = base.positions.cols(); i < near.positions.cols(); ++i)
+    beyond += (near.positions.col(i) - spec.focus).norm() > 0.02;
+  EXPECT_LT(beyond, added_near / 5) << beyond << " of " << added_near << " new vertices beyond 20 mm";
+}
+
+TEST(MeshRefinement, DependsOnlyOnTheBaseAndTheFocus) {
+  const TetMesh& base = base_mesh();
+  const TetMesh a = refine_mesh(base, spec_at(0.01, 0.01));
+  const TetMesh b = refine_mesh(base, spec_at(0.01, 0.01));
+  EXPECT_TRUE(a.positions == b.positions);
+  EXPECT_TRUE(a.tetrahedra == b.tetrahedra);
+  // Refocusing elsewhere and back gives the same mesh: refinement always starts from the base.
+  const TetMesh elsewhere = refine_mesh(base, spec_at(-0.03, 0.0));
+  EXPECT_NE(elsewhere.positions.cols(), 0);
+  const TetMesh back = refine_mesh(base, spec_at(0.01, 0.01));
+  EXPECT_TRUE(a.positions == back.positions);
+}
+
+TEST(MeshRefinement, MidpointsJoinTheSurfaceGroupsOfTheirFaces) {
+  // A mesh with named surface groups: the dome's (base: the flat face z = 0, skin: the curved one).
+  const TetMesh dome = read_mesh(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "meshes" / "palpation_dome.msh");
+  ASSERT_FALSE(dome.surface_groups.empty());
+  double top = -INFINITY;
+  for (Eigen::Index i = 0; i < dome.positions.cols(); ++i) top = std::max(top, dome.positions(2, i));
+  MeshRefinement spec;
+  spec.focus = Vec3(0, 0, top);
+  spec.focus_size = 0.5 * (dome.positions.col(dome.tetrahedra[0][0]) - dome.positions.col(dome.tetrahedra[0][1])).norm();
+  spec.growth = 1.2;
+  const TetMesh fine = refine_mesh(dome, spec);
+  ASSERT_GT(fine.positions.cols(), dome.positions.cols());
+  // A group's new members are midpoints of its own boundary edges: the base group's stay on z = 0.
+  for (size_t g = 0; g < fine.surface_groups.size(); ++g) {
+    const auto& group = fine.surface_groups[g];
+    ASSERT_EQ(group.name, dome.surface_groups[g].name);
+    EXPECT_GE(group.nodes.size(), dome.surface_groups[g].nodes.size());
+    if (group.name == "base") {
+      for (int v : group.nodes) EXPECT_EQ(fine.positions(2, v), 0.0);
+    }
+  }
+  // Every boundary vertex belongs to some group (the dome's boundary is base + skin).
+  std::vector<uint8_t> grouped(fine.positions.cols(), 0);
+  for (const auto& group : fine.surface_groups)
+    for (int v : group.nodes) grouped[v] = 1;
+  for (const auto& f : fine.boundary_faces)
+    for (int v : f) EXPECT_TRUE(grouped[v]) << "boundary vertex " << v << " in no group";
+}
+
+TEST(MeshRefinement, RefusesWhatCannotBeMeant) {
+  MeshRefinement spec = spec_at(0, 0);
+  spec.focus_size = 0;
+  EXPECT_THROW(refine_mesh(base_mesh(), spec), std::invalid_argument);
+  spec = spec_at(0, 0);
+  spec.growth = 1.0;
+  EXPECT_THROW(refine_mesh(base_mesh(), spec), std::invalid_argument);
+  spec = spec_at(NAN, 0);
+  EXPECT_THROW(refine_mesh(base_mesh(), spec), std::invalid_argument);
+}
+
+TEST(MeshRefinement, NearestBoundaryPointIsOnTheSurface) {
+  // Above the block: straight down onto the top face; beside it: onto the side.
+  EXPECT_TRUE(nearest_boundary_point(base_mesh(), Vec3(0.01, -0.02, 0.03)).isApprox(Vec3(0.01, -0.02, 0.0), 1e-12));
+  EXPECT_TRUE(nearest_boundary_point(base_mesh(), Vec3(0.07, 0.0, -0.02)).isApprox(Vec3(0.05, 0.0, -0.02), 1e-12));
+}
+
+TEST(MeshRefinement, SceneRefinesTowardTheTool) {
+  // The scene's refine object: the cloud follows indenter.position (nearest surface point).
+  const fs::path scene_file = fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_block_follow.json";
+  Scene scene = load_scene(scene_file);
+  const NodeCloud at_centre = make_node_cloud(scene);
+  scene.indenter.position_given = true;
+  scene.indenter.position = Vec3(0.02, 0.02, 0.011);
+  const NodeCloud at_site = make_node_cloud(scene);
+  MeshRefinement spec = spec_at(0.02, 0.02);
+  spec.focus_size = scene.distribution.refine.size;
+  spec.max_size = scene.distribution.refine.max_size;
+  const TetMesh direct = refine_mesh(base_mesh(), spec);
+  EXPECT_TRUE(at_site.positions == direct.positions);
+  EXPECT_NE(at_centre.positions.cols(), 0);
+  // Without a size the refinement takes the spacing the scene asks for (core/resolution.h):
+  // a third of the Hertz contact radius at the smallest verification force (0.86 mm here).
+  const Scene derived = parse_scene(R"({"body": {"box": {"min": [-0.05, -0.05, -0.05], "max": [0.05, 0.05, 0]},
+                                                  "distribution": {"type": "mesh", "file": ")" + kBaseMesh.string() + R"(",
+                                                                   "refine": {"growth": 1.3}}},
+                                         "mls": {"volumes": "mesh"},
+                                         "material": {"young_modulus": 2e4, "poisson_ratio": 0.3},
+                                         "indenter": {"radius": 0.01},
+                                         "verify": {"forces": [0.05, 0.262]}})",
+                                    "derived.json", ".");
+  EXPECT_NEAR(derived.distribution.refine.size, 0.00086, 0.00001);
+  EXPECT_EQ(derived.distribution.refine.growth, 1.3);
+}
+
+}  // namespace
+}  // namespace palpate
