@@ -11,10 +11,14 @@
 # Writes DIR/<scene>_<x>.json (palpate-verify --json), DIR/lateral_scan.csv (one row
 # per site and force), DIR/lateral_scan.md (the tables) and DIR/lateral_scan.png.
 #
-# usage: scripts/lateral_scan_study.sh [--references] [--depth D] [--out DIR]
+# With --follow the scenes are palpation_lump_follow and palpation_block_follow (their
+# clouds refined in-process at each site, docs/physics.md §7) against the same references.
+#
+# usage: scripts/lateral_scan_study.sh [--references] [--follow] [--depth D] [--out DIR]
 #   --references  recompute the references at every site (about a minute each)
 #   --depth D     the fixed depth of the signal, m (default 0.0012)
 #   --sites LIST  x of the sites, m, comma-separated (default -0.02,-0.015,...,0.02)
+#   --follow      the refined-at-the-tool scenes (output default docs/verification/lateral_scan_follow)
 #   --out DIR     output folder (default docs/verification/lateral_scan)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
 # built there (Release) when stale, through scripts/build.sh.
@@ -24,10 +28,12 @@ cd "$(dirname "$0")/.."
 references=0
 depth=0.0012
 sites_list="-0.02,-0.015,-0.01,-0.005,0,0.005,0.01,0.015,0.02"
-out=docs/verification/lateral_scan
+out=
+suffix=
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --references) references=1 ;;
+    --follow) suffix=_follow ;;
     --depth) depth=${2:?--depth needs a value in m}; shift ;;
     --sites) sites_list=${2:?--sites needs a list}; shift ;;
     --out) out=${2:?--out needs a folder}; shift ;;
@@ -37,6 +43,7 @@ while [[ $# -gt 0 ]]; do
   shift
 done
 
+[[ -n $out ]] || out=docs/verification/lateral_scan$suffix
 BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
@@ -45,21 +52,21 @@ mkdir -p "$out"
 IFS=, read -r -a sites <<< "$sites_list"
 
 for x in "${sites[@]}"; do
-  for scene in palpation_lump palpation_block; do
+  for physics in palpation_lump palpation_block; do
+    scene=$physics$suffix
     # The block's reference at the centre is stored already; off-centre ones are computed
     # like the lump's (the key names the site, so verify finds each by itself).
-    file="scenes/references/${scene}_site_${x}_0.json"
-    [[ $scene == palpation_block && $x == 0 ]] && file=scenes/references/palpation_block.json
-    [[ $scene == palpation_lump && $x == 0 ]] && file=scenes/references/palpation_lump.json
+    file="scenes/references/${physics}_site_${x}_0.json"
+    [[ $x == 0 ]] && file=scenes/references/$physics.json
     if [[ $references == 1 || ! -f "$file" ]]; then
-      echo "lateral_scan_study.sh: palpate-reference --scene scenes/$scene.json --site $x,0" >&2
+      echo "lateral_scan_study.sh: palpate-reference --scene scenes/$physics.json --site $x,0" >&2
       start=$SECONDS
-      "$reference" --scene "scenes/$scene.json" --site "$x,0" --out "$file" --quiet > /dev/null
-      echo "lateral_scan_study.sh: reference of $scene at x = $x: $((SECONDS - start)) s" >&2
+      "$reference" --scene "scenes/$physics.json" --site "$x,0" --out "$file" --quiet > /dev/null
+      echo "lateral_scan_study.sh: reference of $physics at x = $x: $((SECONDS - start)) s" >&2
     fi
     echo "lateral_scan_study.sh: palpate-verify --scene scenes/$scene.json --site $x,0" >&2
     start=$SECONDS
-    "$verify" --scene "scenes/$scene.json" --site "$x,0" --json --quiet > "$out/${scene}_$x.json" || true
+    "$verify" --scene "scenes/$scene.json" --site "$x,0" --reference "$file" --json --quiet > "$out/${scene}_$x.json" || true
     echo "lateral_scan_study.sh: $scene at x = $x: $((SECONDS - start)) s" >&2
   done
 done

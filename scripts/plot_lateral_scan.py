@@ -40,7 +40,7 @@ def main():
             runs[(scene, float(x))] = json.load(open(path))
         except (ValueError, json.JSONDecodeError):
             print("plot_lateral_scan.py: %s is not a palpate-verify result; skipped" % path, file=sys.stderr)
-    scenes = sorted({s for s, _ in runs}, key=lambda s: (s != "palpation_lump", s))
+    scenes = sorted({s for s, _ in runs}, key=lambda s: (not s.startswith("palpation_lump"), s))
     csv = ["scene,site_x_m,particles,force_N,d_sim_m,d_ref_m,d_ref_uncertainty_m,err_ref,status"]
     md = ["Errors in depth against the finite-block reference at each site (per cent, at the forces of the "
           "sweep), and the force at the fixed depth %g mm interpolated from each curve." % (1e3 * depth), "",
@@ -75,6 +75,18 @@ def main():
                 "-" if j["l2_error_reference"] is None else "%.2f %%" % (100 * j["l2_error_reference"]),
                 num(f_sim), num(f_ref),
                 "-" if f_sim is None or f_ref is None else "%+.1f %%" % (100 * (f_sim / f_ref - 1))))
+    # The signal: F with the lump / F without it at the fixed depth, simulated against the references'.
+    lump = next((s for s in scenes if s.startswith("palpation_lump")), None)
+    block = next((s for s in scenes if s.startswith("palpation_block")), None)
+    if lump and block:
+        md += ["", "The signal F(with the lump) / F(without) at d = %g mm, per cent; difference in percentage points."
+               % (1e3 * depth), "", "| x [mm] | simulated | reference | difference |", "|---:|---:|---:|---:|"]
+        without = {x: (fs, fr) for x, fs, fr in signal[block]}
+        for x, fs, fr in signal[lump]:
+            if x not in without or None in (fs, fr) + without[x]:
+                continue
+            rs, rr = fs / without[x][0], fr / without[x][1]
+            md.append("| %g | %.1f | %.1f | %+.1f |" % (1e3 * x, 100 * rs, 100 * rr, 100 * (rs - rr)))
     open(os.path.join(out, "lateral_scan.csv"), "w").write("\n".join(csv) + "\n")
     open(os.path.join(out, "lateral_scan.md"), "w").write("\n".join(md) + "\n")
     print("\n".join(md))
@@ -82,7 +94,7 @@ def main():
     fig, ax = plt.subplots(figsize=(7, 4.2))
     style = {"palpation_lump": ("C3", "with the lump"), "palpation_block": ("C0", "without (homogeneous)")}
     for scene, points in signal.items():
-        colour, label = style.get(scene, ("C7", scene))
+        colour, label = style.get(scene.replace("_follow", ""), ("C7", scene))
         xs = [1e3 * x for x, _, _ in points]
         ax.plot(xs, [f if f is not None else float("nan") for _, f, _ in points], "o-", color=colour,
                 label="MLS, " + label)

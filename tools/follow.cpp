@@ -48,12 +48,17 @@ path against quasi-static references.
   --speed V             target speed along the path, m/s (default 0.01)
   --from X,Y            start of the path on the top face, m (default -0.035,0)
   --to X,Y              its end, m (default 0.035,0)
-  --refocus-distance D  refocus when the tool is D from the focus, m (default 0.001)
-  --latency S           a refocus is swapped in S after it is asked for, s (default 0.2:
-                        about the measured build time of a 6000-particle cloud)
+  --refocus-distance D  refocus when the tool is D from the focus, m (default 0.0005)
+  --latency S           a refocus's new cloud is ready S after it is asked for, s (default:
+                        the wall time its refinement and model build took here, as if built
+                        on the second core beside the running one)
   --settle N            steps the new cloud runs beside the current one, the tool shared,
                         before it takes over (default 40)
-  --lead                aim a refocus at where the tool will be after the latency (default)
+  --blend N             after the swap the old cloud keeps stepping for N steps, the tool
+                        shared, and the force reported (what a device would be given) moves
+                        linearly from its contact force to the new cloud's (default 40; 0: none)
+  --lead                aim a refocus ahead along the tool's velocity, so that the tool passes
+                        the new focus midway between its swap and the next (default)
   --no-lead             aim it at where the tool is
   --reference X,Y,FILE  the quasi-static reference at a site of the path (repeatable; ordered
                         along the path): the depth at --force is interpolated between them
@@ -95,8 +100,8 @@ double median(std::vector<double> v) {
 int main(int argc, char** argv) {
   std::string scene_file, csv_file;
   SceneOverrides overrides;
-  double force = 0.12, speed = 0.01, refocus_distance = 0.001, latency = 0.2, stiffness = 100;
-  long settle_steps = 40;
+  double force = 0.12, speed = 0.01, refocus_distance = 0.0005, latency = -1, stiffness = 100;
+  long settle_steps = 40, blend_steps = 40;
   Eigen::Vector2d from(-0.035, 0), to(0.035, 0);
   bool lead = true, json = false, quiet = false;
   struct Site {
@@ -118,8 +123,16 @@ int main(int argc, char** argv) {
     else if (arg == "--from") from = point(value());
     else if (arg == "--to") to = point(value());
     else if (arg == "--refocus-distance") refocus_distance = cli::positive_list(value(), arg).at(0);
-    else if (arg == "--latency") latency = cli::number_list(value(), arg).at(0);
+    else if (arg == "--latency") {
+      latency = cli::number_list(value(), arg).at(0);
+      if (latency < 0) throw std::invalid_argument("--latency must be >= 0 s");
+    }
     else if (arg == "--settle") settle_steps = cli::positive_list<long>(value(), arg).at(0);
+    else if (arg == "--blend") {
+      const double n = cli::number_list(value(), arg).at(0);
+      if (n < 0 || n != std::floor(n)) throw std::invalid_argument("--blend: a whole number of steps >= 0");
+      blend_steps = static_cast<long>(n);
+    }
     else if (arg == "--lead") lead = true;
     else if (arg == "--no-lead") lead = false;
     else if (arg == "--reference") {
@@ -136,7 +149,6 @@ int main(int argc, char** argv) {
     return true;
   });
   if (scene_file.empty()) cli::usage_error("palpate-follow", "--scene is required", kUsage);
-  if (latency < 0) cli::usage_error("palpate-follow", "--latency must be >= 0", kUsage);
 
   try {
     Scene scene = load_scene(scene_file, overrides);
@@ -194,19 +206,23 @@ int main(int argc, char** argv) {
     reset_health(current.model, sliding, state);
     const Vec3 start = state.indenter_center;
     const double t0 = state.time;
-    const long latency_steps = std::lround(latency / dt);
+    // The expected delay from asking for a refocus to its swap (for the aim): the last build's.
+    double expected_delay = latency >= 0 ? latency : 0.2;
 
     std::ofstream csv;
     if (!csv_file.empty()) {
       csv.open(csv_file);
-      csv << "s_m,depth_m,depth_ref_m,fz_N,fx_N,particles,swap\n";
+      csv << "s_m,depth_m,depth_ref_m,fz_N,fz_model_N,fx_N,particles,swap\n";
     }
     std::vector<Swap> swaps;
     std::vector<double> errors;  // relative depth error along the path where a reference exists
     bool pending = false;
     long swap_at = 0;
     CloudTransfer transfer;
-    State shadow;
+    State shadow, retired_state;
+    Cloud retired;
+    long blend_from = -1, blend_end = -1;
+    double worst_change = 0, worst_change_s = NAN;
     double last_transfer_ms = 0, last_apply_ms = 0;
     Cloud next;
     double fz_prev = 0, depth_prev = 0, worst_jump = 0, worst_jump_s = NAN;
@@ -221,14 +237,18 @@ int main(int argc, char** argv) {
       const double s = (Eigen::Vector2d(c[0], c[1]) - from).dot(direction);
       // Refocus: asked for when the surface point under the tool is far from the focus.
       if (!pending && (nearest_boundary_point(base, c) - current.focus).norm() > refocus_distance) {
-        // Aimed ahead along the tool's velocity: where it will be at the swap, plus the refocus
-        // distance, so that it passes the new focus halfway to the next refocus.
+        // Aimed ahead along the tool's velocity by 1.5 times the delay to the swap: if the next
+        // refocus is asked for at once, the tool is half a delay behind the focus at this swap
+        // and half a delay past it at the next.
         Vec3 aim = c;
         const Vec3 v(state.indenter_velocity[0], state.indenter_velocity[1], 0.0);
-        if (lead && v.norm() > 0) aim += latency * v + refocus_distance * v.normalized();
+        const double delay = expected_delay + settle_steps * dt;  // until the swap
+        if (lead && v.norm() > 0) aim += 1.5 * delay * v;
         next = make_cloud(aim);
+        const double build_s = 1e-3 * (next.refine_ms + next.build_ms);
+        if (latency < 0) expected_delay = build_s;
         pending = true;
-        swap_at = k + latency_steps;
+        swap_at = k + std::lround((latency >= 0 ? latency : build_s) / dt);
       }
       bool swapped = false;
       // The shadow: the new cloud, carried over from the state at the end of the latency, is
@@ -273,20 +293,54 @@ int main(int argc, char** argv) {
         shadow.health = state.health;
         State fresh = std::move(shadow);
         shadow = State();
+        retired_state = std::move(state);
         state = std::move(fresh);
+        retired = std::move(current);
+        blend_from = k;
+        blend_end = k + blend_steps;
         current = std::move(next);
         sw.particles_after = current.model.particle_count;
         swaps.push_back(sw);
         pending = false;
         swapped = true;
       }
+      // The retired cloud keeps stepping beside the new one for --blend steps, the tool shared,
+      // and the force rendered moves from its contact force to the new one's linearly.
+      const bool blending = blend_from >= 0 && k < blend_from + blend_steps;
+      double fz_retired = 0;
+      if (blending) {
+        retired_state.indenter_center = state.indenter_center;
+        retired_state.indenter_velocity = state.indenter_velocity;
+        retired_state.force_command = state.force_command;
+        retired_state.tool_target = target;
+        if (is_fault(step(retired.model, sliding, retired_state))) blend_from = -1;  // let it go
+        fz_retired = retired_state.indenter_contact_force[2];
+      }
       const StepStatus st = step(current.model, sliding, state);
       if (is_fault(st)) {
         status = "diverged: " + describe(state.health.report);
         break;
       }
-      const double fz = state.indenter_contact_force[2];  // the body pushes the tool up
+      const double fz_model = state.indenter_contact_force[2];  // the body pushes the tool up
+      double fz = fz_model;  // what a device would be given
+      if (blending && blend_from >= 0) {
+        const double alpha = static_cast<double>(k - blend_from + 1) / (blend_steps + 1);
+        fz = (1 - alpha) * fz_retired + alpha * fz_model;
+      }
+      if (blend_from >= 0 && k + 1 >= blend_from + blend_steps) {
+        retired = Cloud();
+        retired_state = State();
+        blend_from = -1;
+      }
       const double depth = indentation_at_tool(current.model, state);
+      // The largest step of the force given while the resolution changes (the swap and the blend).
+      if (!swaps.empty() && k <= blend_end) {
+        const double change = std::abs(fz - fz_prev) / force;
+        if (change > worst_change) {
+          worst_change = change;
+          worst_change_s = (Eigen::Vector2d(state.indenter_center[0], state.indenter_center[1]) - from).dot(direction);
+        }
+      }
       if (swapped) {
         Swap& sw = swaps.back();
         sw.fz_after = fz;
@@ -301,7 +355,7 @@ int main(int argc, char** argv) {
       const double d_ref = reference_depth(s_now);
       if (std::isfinite(d_ref)) errors.push_back(depth / d_ref - 1.0);
       if (csv.is_open())
-        csv << s_now << ',' << depth << ',' << d_ref << ',' << fz << ',' << state.indenter_contact_force[0] << ','
+        csv << s_now << ',' << depth << ',' << d_ref << ',' << fz << ',' << fz_model << ',' << state.indenter_contact_force[0] << ','
             << current.model.particle_count << ',' << (swapped ? 1 : 0) << '\n';
       fz_prev = fz;
       depth_prev = depth;
@@ -329,12 +383,14 @@ int main(int argc, char** argv) {
       out["force"] = force;
       out["speed"] = speed;
       out["refocus_distance"] = refocus_distance;
-      out["latency"] = latency;
+      out["latency"] = latency >= 0 ? nlohmann::json(latency) : nlohmann::json("measured");
       out["lead"] = lead;
       out["status"] = status;
       out["steps"] = k;
       out["refocus_count"] = swaps.size();
       out["worst_jump_relative"] = worst_jump;
+      out["worst_step_while_changing"] = worst_change;
+      out["worst_step_while_changing_s"] = worst_change_s;
       out["worst_jump_s"] = worst_jump_s;
       out["worst_depth_error"] = errors.empty() ? NAN : worst_error;
       out["rms_depth_error"] = errors.empty() ? NAN : std::sqrt(sum2 / errors.size());
@@ -350,6 +406,8 @@ int main(int argc, char** argv) {
       std::printf("palpate-follow: %s, %g N at %g m/s from (%g, %g) to (%g, %g): %s, %ld steps, %zu refocus\n",
                   scene_file.c_str(), force, speed, from[0], from[1], to[0], to[1], status.c_str(), k, swaps.size());
       std::printf("  largest jump of F_z at a swap: %.3f %% of F (at s = %.1f mm)\n", 100 * worst_jump, 1e3 * worst_jump_s);
+      std::printf("  largest step of F_z while the resolution changes (swap and blend): %.3f %% of F (at s = %.1f mm)\n",
+                  100 * worst_change, 1e3 * worst_change_s);
       if (!errors.empty())
         std::printf("  depth against the references along the path: worst %.2f %%, rms %.2f %%\n", 100 * worst_error,
                     100 * std::sqrt(sum2 / errors.size()));
