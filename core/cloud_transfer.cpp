@@ -181,10 +181,7 @@ void transfer_state(const CloudTransfer& transfer, const Model& from_model, cons
     to.position.col(i) = to_model.fixed[i] ? Vec3(to_model.rest_position.col(i)) : Vec3(to_model.rest_position.col(i) + u);
     to.velocity.col(i) = to_model.fixed[i] ? Vec3::Zero() : v;
   }
-  to.indenter_center = from.indenter_center;
-  to.indenter_velocity = from.indenter_velocity;
-  to.force_command = from.force_command;
-  to.tool_target = from.tool_target;
+  copy_tool(from, to);
   to.indenter_contact_force = from.indenter_contact_force;
   to.time = from.time;
   to.tick = from.tick;

@@ -103,6 +103,15 @@ struct CarriedState {
   HealthMonitor health;
 };
 
+// The tool's part of a carried state (centre, velocity, command, coupling target): what two
+// models stepped side by side with one tool share (a refocus, core/cloud_transfer.h).
+inline void copy_tool(const CarriedState& from, CarriedState& to) {
+  to.indenter_center = from.indenter_center;
+  to.indenter_velocity = from.indenter_velocity;
+  to.force_command = from.force_command;
+  to.tool_target = from.tool_target;
+}
+
 // Written by a stage during a step, read by later stages of the same step or by the
 // caller after it; the next step overwrites them.
 struct StepOutputs {

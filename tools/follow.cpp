@@ -265,9 +265,7 @@ int main(int argc, char** argv) {
         last_apply_ms = ms_since(t2);
       }
       if (pending && k >= swap_at && k < swap_at + settle_steps) {
-        shadow.indenter_center = state.indenter_center;
-        shadow.indenter_velocity = state.indenter_velocity;
-        shadow.force_command = state.force_command;
+        copy_tool(state, shadow);
         shadow.tool_target = target;
         if (is_fault(step(next.model, sliding, shadow))) {
           status = "the shadow diverged: " + describe(shadow.health.report);
@@ -286,10 +284,7 @@ int main(int argc, char** argv) {
         sw.apply_ms = last_apply_ms;
         sw.exact = transfer.exact;
         // The tool stays the current one's; the body is the shadow's.
-        shadow.indenter_center = state.indenter_center;
-        shadow.indenter_velocity = state.indenter_velocity;
-        shadow.force_command = state.force_command;
-        shadow.tool_target = state.tool_target;
+        copy_tool(state, shadow);
         shadow.health = state.health;
         State fresh = std::move(shadow);
         shadow = State();
@@ -309,9 +304,7 @@ int main(int argc, char** argv) {
       const bool blending = blend_from >= 0 && k < blend_from + blend_steps;
       double fz_retired = 0;
       if (blending) {
-        retired_state.indenter_center = state.indenter_center;
-        retired_state.indenter_velocity = state.indenter_velocity;
-        retired_state.force_command = state.force_command;
+        copy_tool(state, retired_state);
         retired_state.tool_target = target;
         if (is_fault(step(retired.model, sliding, retired_state))) blend_from = -1;  // let it go
         fz_retired = retired_state.indenter_contact_force[2];
