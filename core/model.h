@@ -124,6 +124,10 @@ struct Model {
   double total_volume = 0.0;      // sum v_i, m^3 (compare with box_volume)
   double box_volume = 0.0;        // m^3: the scene's box; a mesh body without /body/box: the mesh's volume
   double min_spacing = 0.0;       // smallest nearest-neighbour distance (FEM: element edge), m
+  // The stable step from the model's highest frequency (time_step.h, spectral_time_step) with
+  // the scene's integrator: computed by build_model only for a refined mesh whose dt the
+  // spacing estimate refuses (MLS, explicit integrators), else 0 (not computed), s.
+  double spectral_time_step = 0.0;
   double max_spacing = 0.0;       // largest nearest-neighbour distance (FEM: element edge), m
   double wave_speed = 0.0;        // fastest p-wave speed present, max_i sqrt((lambda_i + 2 mu_i) / rho_i), m/s
   int64_t mesh_tetrahedra = 0;    // mesh clouds: tetrahedra read (0 otherwise)

@@ -1,10 +1,14 @@
 #include "core/time_step.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <string>
+#include <vector>
 
+#include "core/mls_forces.h"
 #include "core/thread_pool.h"
 
 namespace palpate {
@@ -59,6 +63,60 @@ double stable_time_step(const Model& model, IntegratorType integrator) {
   return envelope_constant(model, integrator) * model.min_spacing / envelope_wave_speed(model);
 }
 
+double spectral_time_step(const Model& model, IntegratorType integrator) {
+  if (model.solid != SolidKind::mls || integrator == IntegratorType::implicit_euler) return 0.0;
+  const int n = model.particle_count;
+  // A = M^-1/2 K M^-1/2 on the free particles (K = -df/dx at rest).
+  std::vector<double> scale(n);
+  int free_count = 0;
+  for (int i = 0; i < n; ++i) {
+    scale[i] = model.fixed[i] ? 0.0 : 1.0 / std::sqrt(model.mass[i]);
+    free_count += !model.fixed[i];
+  }
+  if (free_count == 0) return 0.0;
+  std::vector<double> tangent_F, tangent_law_factor;
+  mls_linearize(model, model.rest_position, tangent_F, tangent_law_factor);
+  Points dx(3, n), df(3, n);
+  auto apply = [&](const Points& v, Points& out) {
+    for (int i = 0; i < n; ++i) dx.col(i) = scale[i] * v.col(i);
+    mls_force_differential(model, tangent_F, tangent_law_factor, dx, df);
+    for (int i = 0; i < n; ++i) out.col(i) = -scale[i] * df.col(i);
+  };
+  const int steps = std::min(60, 3 * free_count);
+  std::vector<Points> basis;
+  basis.reserve(steps + 1);
+  // A fixed, seeded start (the result must not depend on the run).
+  std::mt19937_64 rng(20261206);
+  Points q(3, n);
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) q(c, i) = scale[i] > 0 ? static_cast<double>(rng() >> 11) * 0x1.0p-53 - 0.5 : 0.0;
+  q /= q.norm();
+  basis.push_back(q);
+  std::vector<double> alpha, beta;
+  Points w(3, n);
+  for (int j = 0; j < steps; ++j) {
+    apply(basis[j], w);
+    alpha.push_back((w.array() * basis[j].array()).sum());
+    for (const Points& b : basis) w -= (w.array() * b.array()).sum() * b;  // full reorthogonalisation
+    for (const Points& b : basis) w -= (w.array() * b.array()).sum() * b;  // twice is enough
+    const double norm = w.norm();
+    beta.push_back(norm);
+    if (norm <= 1e-12 * std::abs(alpha.back())) break;
+    basis.push_back(w / norm);
+  }
+  const int m = static_cast<int>(alpha.size());
+  Eigen::MatrixXd T = Eigen::MatrixXd::Zero(m, m);
+  for (int j = 0; j < m; ++j) {
+    T(j, j) = alpha[j];
+    if (j + 1 < m) T(j, j + 1) = T(j + 1, j) = beta[j];
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(T);
+  const double ritz = eig.eigenvalues()[m - 1];
+  const double residual = beta[m - 1] * std::abs(eig.eigenvectors()(m - 1, m - 1));  // ||A y - theta y||
+  const double omega = std::sqrt(std::max(ritz + residual, 1e-300));
+  return (integrator == IntegratorType::rk4 ? 2.785 : 2.0) / omega;
+}
+
 void check_options(const Model& model, const Options& opt) {
   const IntegratorSpec& in = opt.integrator;
   if (in.threads < 1 || in.threads > kMaxThreads)
@@ -66,14 +124,21 @@ void check_options(const Model& model, const Options& opt) {
                      std::to_string(in.threads) + " threads (1 ... " + std::to_string(kMaxThreads) + ")");
   const double dt_max = stable_time_step(model, in.type);
   if (in.allow_unstable_dt || in.dt <= dt_max) return;
-  char text[512];
+  if (model.spectral_time_step > 0 && in.dt <= kSpectralSafety * model.spectral_time_step) return;
+  char text[768];
   std::snprintf(text, sizeof text,
                 "%g s is outside the measured stable envelope of %s with the %s model: dt <= c dx_min / c_p = "
                 "%.3g x %.4g m / %.4g m/s = %.4g s (docs/stability.md). Use a smaller dt, or set "
                 "integrator.allow_unstable_dt to true to run anyway",
                 in.dt, to_string(in.type), to_string(model.solid), envelope_constant(model, in.type), model.min_spacing,
                 envelope_wave_speed(model), dt_max);
-  throw SceneError(model.source, "/integrator/dt", text);
+  std::string message = text;
+  if (model.spectral_time_step > 0) {
+    std::snprintf(text, sizeof text, "; nor within %g of the model's spectral estimate 2 / omega_max = %.4g s",
+                  kSpectralSafety, model.spectral_time_step);
+    message.insert(message.find(" (docs/stability.md)"), text);
+  }
+  throw SceneError(model.source, "/integrator/dt", message);
 }
 
 }  // namespace palpate
