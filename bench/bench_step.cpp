@@ -24,6 +24,7 @@
 
 #include "bench/fma_peak.h"
 #include "cli/arguments.h"
+#include "cli/statistics.h"
 #include "tools/load_scene.h"
 #include "core/checkpoint.h"
 #include "core/contact.h"
@@ -64,11 +65,7 @@ same run, interleaved); prints medians.
   --json            print one JSON object instead of the table
 )";
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t k = v.size() / 2;
-  return v.size() % 2 ? v[k] : 0.5 * (v[k - 1] + v[k]);
-}
+using cli::median;
 
 // How full the blocked force loop's lanes are: the weighted pairs over 4 x the neighbour slots
 // (a block's four lists padded to its longest), and over 4 x the union of the four lists -- the

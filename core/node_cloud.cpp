@@ -232,11 +232,15 @@ Vec3 tool_centre(const Scene& scene, const TetMesh& mesh) {
   return Vec3(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2] + scene.indenter.radius);
 }
 
+Vec3 refinement_focus(const Scene& scene, const TetMesh& base, const Vec3& tool) {
+  return scene.distribution.focus_given ? scene.distribution.focus : nearest_boundary_point(base, tool);
+}
+
 NodeCloud refined_mesh_cloud(const Scene& scene, const TetMesh& base, const Vec3& tool) {
   const DistributionSpec& d = scene.distribution;
   if (!d.refine.enabled()) return mesh_cloud(base);
   MeshRefinement spec;
-  spec.focus = d.focus_given ? d.focus : nearest_boundary_point(base, tool);
+  spec.focus = refinement_focus(scene, base, tool);
   spec.focus_size = d.refine.size;
   spec.growth = d.refine.growth;
   if (d.refine.max_size > 0) spec.max_size = d.refine.max_size;

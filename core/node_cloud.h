@@ -73,6 +73,9 @@ NodeCloud mesh_node_cloud(const Scene& scene);
 // The tool's centre a scene starts with: indenter.position, else over the centre of the
 // mesh's bounding box, one radius above its top (build_model places it there).
 Vec3 tool_centre(const Scene& scene, const TetMesh& mesh);
+// The point a mesh's refinement aims at when the tool's centre is `tool`: distribution.focus
+// when given, else the point of the base's boundary surface nearest the tool.
+Vec3 refinement_focus(const Scene& scene, const TetMesh& base, const Vec3& tool);
 // The cloud of a mesh distribution from its (already read and checked) base mesh: the base
 // itself, or with distribution.refine the base refined (core/mesh_refinement.h) toward
 // distribution.focus when given, else toward the point of the body's surface nearest `tool`

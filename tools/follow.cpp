@@ -14,7 +14,6 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -22,10 +21,10 @@
 #include "analysis/reference.h"
 #include "analysis/rest.h"
 #include "cli/arguments.h"
+#include "cli/statistics.h"
 #include "core/cloud_transfer.h"
 #include "core/health.h"
 #include "core/mesh_reader.h"
-#include "core/mesh_refinement.h"
 #include "core/model.h"
 #include "core/node_cloud.h"
 #include "core/options.h"
@@ -88,12 +87,6 @@ struct Swap {
   double refine_ms = 0, build_ms = 0, transfer_ms = 0, apply_ms = 0;
   int exact = 0;
 };
-
-double median(std::vector<double> v) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
 
 }  // namespace
 
@@ -179,7 +172,7 @@ int main(int argc, char** argv) {
     auto make_cloud = [&](const Vec3& tool) {
       Cloud c;
       auto t0 = std::chrono::steady_clock::now();
-      c.focus = nearest_boundary_point(base, tool);
+      c.focus = refinement_focus(scene, base, tool);
       c.cloud = refined_mesh_cloud(scene, base, tool);
       c.refine_ms = ms_since(t0);
       t0 = std::chrono::steady_clock::now();
@@ -236,7 +229,7 @@ int main(int argc, char** argv) {
       const Vec3 c = state.indenter_center;
       const double s = (Eigen::Vector2d(c[0], c[1]) - from).dot(direction);
       // Refocus: asked for when the surface point under the tool is far from the focus.
-      if (!pending && (nearest_boundary_point(base, c) - current.focus).norm() > refocus_distance) {
+      if (!pending && (refinement_focus(scene, base, c) - current.focus).norm() > refocus_distance) {
         // Aimed ahead along the tool's velocity by 1.5 times the delay to the swap: if the next
         // refocus is asked for at once, the tool is half a delay behind the focus at this swap
         // and half a delay past it at the next.
@@ -387,8 +380,8 @@ int main(int argc, char** argv) {
       out["worst_jump_s"] = worst_jump_s;
       out["worst_depth_error"] = errors.empty() ? NAN : worst_error;
       out["rms_depth_error"] = errors.empty() ? NAN : std::sqrt(sum2 / errors.size());
-      out["median_ms"] = {{"refine", median(refine_ms)}, {"build", median(build_ms)},
-                          {"transfer", median(transfer_ms)}, {"apply", median(apply_ms)}};
+      out["median_ms"] = {{"refine", cli::median(refine_ms)}, {"build", cli::median(build_ms)},
+                          {"transfer", cli::median(transfer_ms)}, {"apply", cli::median(apply_ms)}};
       for (const Swap& sw : swaps)
         out["swaps"].push_back({{"s", sw.s}, {"particles", {sw.particles_before, sw.particles_after}},
                                 {"fz", {sw.fz_before, sw.fz_after}}, {"depth", {sw.depth_before, sw.depth_after}},
@@ -405,7 +398,7 @@ int main(int argc, char** argv) {
         std::printf("  depth against the references along the path: worst %.2f %%, rms %.2f %%\n", 100 * worst_error,
                     100 * std::sqrt(sum2 / errors.size()));
       std::printf("  refocus, median ms: refine %.1f, model build %.1f, transfer weights %.1f, apply %.3f\n",
-                  median(refine_ms), median(build_ms), median(transfer_ms), median(apply_ms));
+                  cli::median(refine_ms), cli::median(build_ms), cli::median(transfer_ms), cli::median(apply_ms));
     }
     return status == "ok" ? 0 : 1;
   } catch (const std::exception& e) {
