@@ -14,4 +14,13 @@ inline double median(std::vector<double> v) {
   return v.size() % 2 ? v[k] : 0.5 * (v[k - 1] + v[k]);
 }
 
+// The q-quantile by nearest rank (the smallest sample with at least q of them at or below
+// it), 0 < q <= 1; NaN when there are none.
+inline double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  const double rank = std::ceil(q * static_cast<double>(v.size()));
+  return v[static_cast<size_t>(std::clamp(rank, 1.0, static_cast<double>(v.size()))) - 1];
+}
+
 }  // namespace palpate::cli

@@ -29,12 +29,13 @@ set(project_folders core analysis cli protocol server clients tools bench tests 
 set(allowed_file_examples/embed_core.cpp "core")
 
 # System headers a folder must not include: the real-time core has no networking,
-# threads (but its worker pool's) or sparse direct solver (but the model build's); the local
+# threads (but its worker pool's and its refocus worker's) or sparse direct solver (but the model build's); the local
 # tools and the analysis no networking; the networked programs no solver.
 set(forbidden_core "capnp/;kj/;cholmod;Eigen/CholmodSupport;thread>;mutex>;condition_variable>")
-# ... but for the one place that owns threads: the force loops' worker pool (issue #17,
-# integrator.threads), which may include <thread>.
-set(exempt_core_thread_pool "core/thread_pool.h;core/thread_pool.cpp")
+# ... but for the two places that own threads: the force loops' worker pool (issue #17,
+# integrator.threads) and the refocus worker of a cloud that follows the tool (issue #32,
+# refocus.h, lock-free: atomics only), which may include <thread>.
+set(exempt_core_thread_pool "core/thread_pool.h;core/thread_pool.cpp;core/refocus.h")
 # ... and for the one solve of the model build: the consistent-integration correction's
 # constraint system (a supernodal Cholesky; never called by a step).
 set(exempt_core_cholmod "core/consistent_integration.cpp")

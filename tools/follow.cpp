@@ -1,14 +1,16 @@
 // palpate-follow: the resolution that follows the tool, measured while the tool moves
 // (docs/physics.md §7; issue #32's "Moving"). The scene's mesh is refined toward the tool
-// (distribution.refine, core/mesh_refinement.h); the tool is pressed to rest at the start of
-// a straight path on the top face with a constant normal force, then dragged along it at a
-// constant speed by the virtual coupling (as palpate-slide drags it). Whenever the point of
-// the surface under the tool is more than --refocus-distance from the cloud's focus, a
-// cloud refined toward where the tool will be is built (core/mesh_refinement.h, build_model)
-// and swapped in --latency later (the time a build takes off the real-time thread), the state
-// carried over by core/cloud_transfer.h. It prints each swap's jump in the contact force and
-// depth, the cost of each part of a refocus, and the depth along the path against the
-// quasi-static references given at sites of the path (linear interpolation between them).
+// (distribution.refine) and refocused as it moves by a FollowingModel (core/refocus.h:
+// ask, build, shadow, swap with a fading force offset); the tool is pressed to rest at the
+// start of a straight path on the top face with a constant normal force, then dragged along
+// it at a constant speed by the virtual coupling (as palpate-slide drags it). It prints each
+// swap's jump in the force a device would be given, the largest step of that force while the
+// resolution changes, the cost of each part of a refocus, the caller's time per step, and
+// the depth along the path against quasi-static references given at sites of the path
+// (linear interpolation between them). Inline (default), a refocus is built on this thread
+// and carried --latency later, so a run is deterministic; with --background it is built and
+// shadowed on a worker thread as a session would, and --paced holds the steps to the
+// wall clock (one step per dt), so that the latency is the real one.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -16,19 +18,18 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "analysis/reference.h"
 #include "analysis/rest.h"
 #include "cli/arguments.h"
 #include "cli/statistics.h"
-#include "core/cloud_transfer.h"
 #include "core/health.h"
-#include "core/mesh_reader.h"
 #include "core/model.h"
-#include "core/node_cloud.h"
 #include "core/options.h"
 #include "core/reference_file.h"
+#include "core/refocus.h"
 #include "core/scene.h"
 #include "core/state.h"
 #include "core/step.h"
@@ -39,30 +40,30 @@ namespace {
 
 const char* kUsage = R"(usage: palpate-follow --scene FILE [options]
 Drags the pressed tool along a straight path of the top face while the cloud's refinement
-follows it (the scene's body.distribution.refine), and reports every refocus: the jump of
-the contact force and depth at the swap, the time each part took, and the depth along the
-path against quasi-static references.
+follows it (the scene's body.distribution.refine; core/refocus.h), and reports every
+refocus: the jump of the force given at the swap, the time each part took, the time per
+step, and the depth along the path against quasi-static references.
   --scene FILE          scene file (JSON) whose mesh distribution has "refine"
   --force F             commanded normal force, N (default 0.12)
   --speed V             target speed along the path, m/s (default 0.01)
   --from X,Y            start of the path on the top face, m (default -0.035,0)
   --to X,Y              its end, m (default 0.035,0)
   --refocus-distance D  refocus when the tool is D from the focus, m (default 0.0005)
-  --latency S           a refocus's new cloud is ready S after it is asked for, s (default:
-                        the wall time its refinement and model build took here, as if built
-                        on the second core beside the running one)
-  --settle N            steps the new cloud runs beside the current one, the tool shared,
-                        before it takes over (default 40)
-  --blend N             after the swap the old cloud keeps stepping for N steps, the tool
-                        shared, and the force reported (what a device would be given) moves
-                        linearly from its contact force to the new cloud's (default 40; 0: none)
+  --latency S           inline: a refocus is carried to its new cloud S after it is asked
+                        for, s (default 0.2, about a build's wall time here)
+  --background          build and shadow on a worker thread (a session's way): the carry
+                        follows the build, so the ticks depend on the machine
+  --paced               one step per dt of wall time (with --background: the real latency)
+  --settle N            shadow steps before a swap, at least (default 160)
+  --fade N              steps over which the swap's force offset fades (default 40; 0: none)
   --lead                aim a refocus ahead along the tool's velocity, so that the tool passes
                         the new focus midway between its swap and the next (default)
   --no-lead             aim it at where the tool is
   --reference X,Y,FILE  the quasi-static reference at a site of the path (repeatable; ordered
                         along the path): the depth at --force is interpolated between them
   --stiffness K         coupling stiffness, N/m (default 100)
-  --csv FILE            one row per step: s along the path, depth, F_z, F_x, particles, swap
+  --csv FILE            one row per step: s along the path, depth, F_z given, F_z of the
+                        model, F_x, particles, swap, the caller's time for the step (ms)
   --set KEY=VALUE       override a scene field (repeatable)
   --json                one JSON object on stdout
   --quiet               no progress on stderr
@@ -72,20 +73,11 @@ double ms_since(std::chrono::steady_clock::time_point t) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
 }
 
-struct Cloud {
-  NodeCloud cloud;
-  Model model;
-  Vec3 focus;
-  double refine_ms = 0, build_ms = 0;
-};
-
 struct Swap {
-  double s = 0;                 // m along the path at the swap
-  int particles_before = 0, particles_after = 0;
-  double fz_before = 0, fz_after = 0;      // N, the contact force's z the step before and after
+  double s = 0;                              // m along the path at the swap
+  double fz_before = 0, fz_after = 0;        // N, the force given the step before and after
   double depth_before = 0, depth_after = 0;  // m
-  double refine_ms = 0, build_ms = 0, transfer_ms = 0, apply_ms = 0;
-  int exact = 0;
+  RefocusRecord record;
 };
 
 }  // namespace
@@ -93,10 +85,10 @@ struct Swap {
 int main(int argc, char** argv) {
   std::string scene_file, csv_file;
   SceneOverrides overrides;
-  double force = 0.12, speed = 0.01, refocus_distance = 0.0005, latency = -1, stiffness = 100;
-  long settle_steps = 40, blend_steps = 40;
+  double force = 0.12, speed = 0.01, stiffness = 100;
+  RefocusOptions refocus;
   Eigen::Vector2d from(-0.035, 0), to(0.035, 0);
-  bool lead = true, json = false, quiet = false;
+  bool background = false, paced = false, json = false, quiet = false;
   struct Site {
     double s;
     double depth;
@@ -110,24 +102,30 @@ int main(int argc, char** argv) {
       if (v.size() != 2) throw std::invalid_argument(arg + ": expected X,Y (m)");
       return Eigen::Vector2d(v[0], v[1]);
     };
+    auto whole = [&](const std::string& text) {
+      const double n = cli::number_list(text, arg).at(0);
+      if (n < 0 || n != std::floor(n) || n > 1e6) throw std::invalid_argument(arg + ": a whole number of steps >= 0");
+      return static_cast<int>(n);
+    };
     if (arg == "--scene") scene_file = value();
     else if (arg == "--force") force = cli::positive_list(value(), arg).at(0);
     else if (arg == "--speed") speed = cli::positive_list(value(), arg).at(0);
     else if (arg == "--from") from = point(value());
     else if (arg == "--to") to = point(value());
-    else if (arg == "--refocus-distance") refocus_distance = cli::positive_list(value(), arg).at(0);
+    else if (arg == "--refocus-distance") refocus.distance = cli::positive_list(value(), arg).at(0);
     else if (arg == "--latency") {
-      latency = cli::number_list(value(), arg).at(0);
-      if (latency < 0) throw std::invalid_argument("--latency must be >= 0 s");
+      refocus.latency = cli::number_list(value(), arg).at(0);
+      if (!(refocus.latency >= 0)) throw std::invalid_argument("--latency must be >= 0 s");
     }
-    else if (arg == "--settle") settle_steps = cli::positive_list<long>(value(), arg).at(0);
-    else if (arg == "--blend") {
-      const double n = cli::number_list(value(), arg).at(0);
-      if (n < 0 || n != std::floor(n)) throw std::invalid_argument("--blend: a whole number of steps >= 0");
-      blend_steps = static_cast<long>(n);
+    else if (arg == "--background") background = true;
+    else if (arg == "--paced") paced = true;
+    else if (arg == "--settle") {
+      refocus.settle_steps = whole(value());
+      if (refocus.settle_steps < 1) throw std::invalid_argument("--settle: at least 1 step");
     }
-    else if (arg == "--lead") lead = true;
-    else if (arg == "--no-lead") lead = false;
+    else if (arg == "--fade") refocus.fade_steps = whole(value());
+    else if (arg == "--lead") refocus.lead = true;
+    else if (arg == "--no-lead") refocus.lead = false;
     else if (arg == "--reference") {
       const std::string text = value();
       const size_t second = text.find(',', text.find(',') + 1);
@@ -145,15 +143,11 @@ int main(int argc, char** argv) {
 
   try {
     Scene scene = load_scene(scene_file, overrides);
-    if (!scene.distribution.refine.enabled() || scene.distribution.focus_given)
-      throw std::invalid_argument(scene_file + ": the scene's mesh must be refined toward the tool "
-                                  "(body.distribution.refine, without distribution.focus)");
     const Eigen::Vector2d direction = (to - from).normalized();
     const double length = (to - from).norm();
     place_indenter_at_site(scene, from[0], from[1], "--from");
     const Options opt = options_of(scene);
     const double dt = opt.integrator.dt;
-    const TetMesh base = read_mesh(scene.distribution.mesh_file);
 
     // The references along the path: d_ref(force) at each site, by its distance along the path.
     std::vector<Site> sites;
@@ -169,180 +163,91 @@ int main(int argc, char** argv) {
       return NAN;
     };
 
-    auto make_cloud = [&](const Vec3& tool) {
-      Cloud c;
-      auto t0 = std::chrono::steady_clock::now();
-      c.focus = refinement_focus(scene, base, tool);
-      c.cloud = refined_mesh_cloud(scene, base, tool);
-      c.refine_ms = ms_since(t0);
-      t0 = std::chrono::steady_clock::now();
-      c.model = build_model(scene, c.cloud);
-      c.build_ms = ms_since(t0);
-      return c;
-    };
-
-    Cloud current = make_cloud(scene.indenter.position);
-    State state = make_state(current.model, opt);
+    FollowingModel follow(scene, scene.indenter.position, refocus, background);
+    State state = make_state(follow.model(), opt);
     Options guided = opt;
     guided.tool_guide = ToolGuide::vertical;
     guided.coupling = {};
-    const PressResult press = press_to_rest(current.model, guided, scene.verify.rest, state, force);
+    const PressResult press = press_to_rest(follow.model(), guided, scene.verify.rest, state, force);
     if (press.failure.status != StepStatus::ok) throw std::runtime_error("the press at the start diverged: " + describe(press.failure));
     if (!quiet)
       std::fprintf(stderr, "palpate-follow: pressed to rest at (%g, %g) with %g N in %ld steps (%d particles)\n", from[0],
-                   from[1], force, press.steps, current.model.particle_count);
+                   from[1], force, press.steps, follow.model().particle_count);
 
     Options sliding = opt;
     sliding.tool_guide = ToolGuide::free;
     sliding.coupling.stiffness = stiffness;
     sliding.coupling.damping = 2.0 * std::sqrt(stiffness * opt.indenter_mass);
-    reset_health(current.model, sliding, state);
+    reset_health(follow.model(), sliding, state);
     const Vec3 start = state.indenter_center;
     const double t0 = state.time;
-    // The expected delay from asking for a refocus to its swap (for the aim): the last build's.
-    double expected_delay = latency >= 0 ? latency : 0.2;
 
     std::ofstream csv;
     if (!csv_file.empty()) {
       csv.open(csv_file);
-      csv << "s_m,depth_m,depth_ref_m,fz_N,fz_model_N,fx_N,particles,swap\n";
+      csv << "s_m,depth_m,depth_ref_m,fz_N,fz_model_N,fx_N,particles,swap,step_ms\n";
     }
     std::vector<Swap> swaps;
     std::vector<double> errors;  // relative depth error along the path where a reference exists
-    bool pending = false;
-    long swap_at = 0;
-    CloudTransfer transfer;
-    State shadow, retired_state;
-    Cloud retired;
-    long blend_from = -1, blend_end = -1;
-    double worst_change = 0, worst_change_s = NAN;
-    double last_transfer_ms = 0, last_apply_ms = 0;
-    Cloud next;
-    double fz_prev = 0, depth_prev = 0, worst_jump = 0, worst_jump_s = NAN;
-    std::string status = "ok";
     const long max_steps = std::lround((length + 0.01) / (speed * dt)) + 20000;
+    std::vector<double> step_ms;  // the caller's time per step: before_step and the step
+    step_ms.reserve(max_steps);
+    long misses = 0;              // paced: steps that ended after their tick's deadline
+    double worst_change = 0, worst_change_s = NAN, fz_prev = 0, depth_prev = 0, worst_jump = 0, worst_jump_s = NAN;
+    int64_t change_end_tick = -1;  // the last tick of the latest swap's fade
+    std::string status = "ok";
+    const auto wall_start = std::chrono::steady_clock::now();
     long k = 0;
     for (; k < max_steps; ++k) {
+      const auto deadline = wall_start + std::chrono::duration<double>((k + 1) * dt);
       const double target_s = speed * (state.time - t0 + dt);
-      const Vec3 target(start[0] + direction[0] * target_s, start[1] + direction[1] * target_s, state.indenter_center[2]);
-      state.tool_target = target;
-      const Vec3 c = state.indenter_center;
-      const double s = (Eigen::Vector2d(c[0], c[1]) - from).dot(direction);
-      // Refocus: asked for when the surface point under the tool is far from the focus.
-      if (!pending && (refinement_focus(scene, base, c) - current.focus).norm() > refocus_distance) {
-        // Aimed ahead along the tool's velocity by 1.5 times the delay to the swap: if the next
-        // refocus is asked for at once, the tool is half a delay behind the focus at this swap
-        // and half a delay past it at the next.
-        Vec3 aim = c;
-        const Vec3 v(state.indenter_velocity[0], state.indenter_velocity[1], 0.0);
-        const double delay = expected_delay + settle_steps * dt;  // until the swap
-        if (lead && v.norm() > 0) aim += 1.5 * delay * v;
-        next = make_cloud(aim);
-        const double build_s = 1e-3 * (next.refine_ms + next.build_ms);
-        if (latency < 0) expected_delay = build_s;
-        pending = true;
-        swap_at = k + std::lround((latency >= 0 ? latency : build_s) / dt);
-      }
-      bool swapped = false;
-      // The shadow: the new cloud, carried over from the state at the end of the latency, is
-      // stepped beside the current one for --settle steps with the tool where the current
-      // one has it, and takes over from it only then (its transient behind it).
-      if (pending && k == swap_at) {
-        const auto t = std::chrono::steady_clock::now();
-        transfer = make_cloud_transfer(current.model.rest_position, current.cloud.tetrahedra, next.model.rest_position,
-                                       next.cloud.tetrahedra);
-        last_transfer_ms = ms_since(t);
-        shadow = make_state(next.model, sliding);
-        const auto t2 = std::chrono::steady_clock::now();
-        transfer_state(transfer, current.model, state, next.model, shadow);
-        last_apply_ms = ms_since(t2);
-      }
-      if (pending && k >= swap_at && k < swap_at + settle_steps) {
-        copy_tool(state, shadow);
-        shadow.tool_target = target;
-        if (is_fault(step(next.model, sliding, shadow))) {
-          status = "the shadow diverged: " + describe(shadow.health.report);
-          break;
-        }
-      }
-      if (pending && k >= swap_at + settle_steps) {
-        Swap sw;
-        sw.s = s;
-        sw.particles_before = current.model.particle_count;
-        sw.fz_before = fz_prev;
-        sw.depth_before = depth_prev;
-        sw.refine_ms = next.refine_ms;
-        sw.build_ms = next.build_ms;
-        sw.transfer_ms = last_transfer_ms;
-        sw.apply_ms = last_apply_ms;
-        sw.exact = transfer.exact;
-        // The tool stays the current one's; the body is the shadow's.
-        copy_tool(state, shadow);
-        shadow.health = state.health;
-        State fresh = std::move(shadow);
-        shadow = State();
-        retired_state = std::move(state);
-        state = std::move(fresh);
-        retired = std::move(current);
-        blend_from = k;
-        blend_end = k + blend_steps;
-        current = std::move(next);
-        sw.particles_after = current.model.particle_count;
-        swaps.push_back(sw);
-        pending = false;
-        swapped = true;
-      }
-      // The retired cloud keeps stepping beside the new one for --blend steps, the tool shared,
-      // and the force rendered moves from its contact force to the new one's linearly.
-      const bool blending = blend_from >= 0 && k < blend_from + blend_steps;
-      double fz_retired = 0;
-      if (blending) {
-        copy_tool(state, retired_state);
-        retired_state.tool_target = target;
-        if (is_fault(step(retired.model, sliding, retired_state))) blend_from = -1;  // let it go
-        fz_retired = retired_state.indenter_contact_force[2];
-      }
-      const StepStatus st = step(current.model, sliding, state);
+      state.tool_target = Vec3(start[0] + direction[0] * target_s, start[1] + direction[1] * target_s, state.indenter_center[2]);
+      const double s = (Eigen::Vector2d(state.indenter_center[0], state.indenter_center[1]) - from).dot(direction);
+      const auto step_start = std::chrono::steady_clock::now();
+      const bool swapped = follow.before_step(sliding, state);
+      const StepStatus st = step(follow.model(), sliding, state);
+      step_ms.push_back(ms_since(step_start));
       if (is_fault(st)) {
         status = "diverged: " + describe(state.health.report);
         break;
       }
+      if (paced) {
+        if (std::chrono::steady_clock::now() > deadline) ++misses;
+        std::this_thread::sleep_until(deadline);
+      }
       const double fz_model = state.indenter_contact_force[2];  // the body pushes the tool up
-      double fz = fz_model;  // what a device would be given
-      if (blending && blend_from >= 0) {
-        const double alpha = static_cast<double>(k - blend_from + 1) / (blend_steps + 1);
-        fz = (1 - alpha) * fz_retired + alpha * fz_model;
-      }
-      if (blend_from >= 0 && k + 1 >= blend_from + blend_steps) {
-        retired = Cloud();
-        retired_state = State();
-        blend_from = -1;
-      }
-      const double depth = indentation_at_tool(current.model, state);
-      // The largest step of the force given while the resolution changes (the swap and the blend).
-      if (!swaps.empty() && k <= blend_end) {
-        const double change = std::abs(fz - fz_prev) / force;
-        if (change > worst_change) {
-          worst_change = change;
-          worst_change_s = (Eigen::Vector2d(state.indenter_center[0], state.indenter_center[1]) - from).dot(direction);
-        }
-      }
+      const double fz = fz_model + follow.force_offset(state)[2];  // what a device is given
+      const double depth = indentation_at_tool(follow.model(), state);
       if (swapped) {
-        Swap& sw = swaps.back();
+        Swap sw;
+        sw.s = s;
+        sw.fz_before = fz_prev;
+        sw.depth_before = depth_prev;
         sw.fz_after = fz;
         sw.depth_after = depth;
+        sw.record = follow.refocuses().back();
+        swaps.push_back(sw);
+        change_end_tick = state.tick + refocus.fade_steps;
         const double jump = std::abs(fz - fz_prev) / force;
         if (!(jump <= worst_jump)) {
           worst_jump = jump;
-          worst_jump_s = sw.s;
+          worst_jump_s = s;
         }
       }
       const double s_now = (Eigen::Vector2d(state.indenter_center[0], state.indenter_center[1]) - from).dot(direction);
+      // The largest step of the force given while the resolution changes (the swap and the fade).
+      if (state.tick <= change_end_tick) {
+        const double change = std::abs(fz - fz_prev) / force;
+        if (change > worst_change) {
+          worst_change = change;
+          worst_change_s = s_now;
+        }
+      }
       const double d_ref = reference_depth(s_now);
       if (std::isfinite(d_ref)) errors.push_back(depth / d_ref - 1.0);
       if (csv.is_open())
         csv << s_now << ',' << depth << ',' << d_ref << ',' << fz << ',' << fz_model << ',' << state.indenter_contact_force[0] << ','
-            << current.model.particle_count << ',' << (swapped ? 1 : 0) << '\n';
+            << follow.model().particle_count << ',' << (swapped ? 1 : 0) << ',' << step_ms.back() << '\n';
       fz_prev = fz;
       depth_prev = depth;
       if (s_now >= length) break;
@@ -355,50 +260,71 @@ int main(int argc, char** argv) {
       worst_error = std::max(worst_error, std::abs(e));
       sum2 += e * e;
     }
-    // Per-step changes of F_z away from swaps: the ripple a homogeneous path shows.
-    std::vector<double> refine_ms, build_ms, transfer_ms, apply_ms;
+    std::vector<double> refine_ms, build_ms, weights_ms, carry_ms, delay_ms;
     for (const Swap& sw : swaps) {
-      refine_ms.push_back(sw.refine_ms);
-      build_ms.push_back(sw.build_ms);
-      transfer_ms.push_back(sw.transfer_ms);
-      apply_ms.push_back(sw.apply_ms);
+      refine_ms.push_back(sw.record.refine_ms);
+      build_ms.push_back(sw.record.build_ms);
+      weights_ms.push_back(sw.record.weights_ms);
+      carry_ms.push_back(sw.record.carry_ms);
+      delay_ms.push_back(1e3 * dt * (sw.record.swap_tick - sw.record.ask_tick));
     }
+    const double step_median = cli::median(step_ms), step_p99 = cli::quantile(step_ms, 0.99),
+                 step_max = step_ms.empty() ? NAN : *std::max_element(step_ms.begin(), step_ms.end());
     if (json) {
       nlohmann::json out;
       out["scene"] = scene_file;
       out["force"] = force;
       out["speed"] = speed;
-      out["refocus_distance"] = refocus_distance;
-      out["latency"] = latency >= 0 ? nlohmann::json(latency) : nlohmann::json("measured");
-      out["lead"] = lead;
+      out["refocus_distance"] = refocus.distance;
+      out["mode"] = background ? "background" : "inline";
+      out["latency"] = background ? nlohmann::json("measured") : nlohmann::json(refocus.latency);
+      out["paced"] = paced;
+      out["lead"] = refocus.lead;
+      out["settle_steps"] = refocus.settle_steps;
+      out["fade_steps"] = refocus.fade_steps;
       out["status"] = status;
       out["steps"] = k;
-      out["refocus_count"] = swaps.size();
+      out["refocus_count"] = follow.refocus_count();
+      out["dropped_count"] = follow.dropped_count();
       out["worst_jump_relative"] = worst_jump;
+      out["worst_jump_s"] = worst_jump_s;
       out["worst_step_while_changing"] = worst_change;
       out["worst_step_while_changing_s"] = worst_change_s;
-      out["worst_jump_s"] = worst_jump_s;
       out["worst_depth_error"] = errors.empty() ? NAN : worst_error;
       out["rms_depth_error"] = errors.empty() ? NAN : std::sqrt(sum2 / errors.size());
+      out["step_ms"] = {{"median", step_median}, {"p99", step_p99}, {"max", step_max}};
+      if (paced) out["deadline_misses"] = misses;
       out["median_ms"] = {{"refine", cli::median(refine_ms)}, {"build", cli::median(build_ms)},
-                          {"transfer", cli::median(transfer_ms)}, {"apply", cli::median(apply_ms)}};
+                          {"weights", cli::median(weights_ms)}, {"carry", cli::median(carry_ms)},
+                          {"ask_to_swap", cli::median(delay_ms)}};
       for (const Swap& sw : swaps)
-        out["swaps"].push_back({{"s", sw.s}, {"particles", {sw.particles_before, sw.particles_after}},
-                                {"fz", {sw.fz_before, sw.fz_after}}, {"depth", {sw.depth_before, sw.depth_after}},
-                                {"exact", sw.exact}, {"refine_ms", sw.refine_ms}, {"build_ms", sw.build_ms},
-                                {"transfer_ms", sw.transfer_ms}, {"apply_ms", sw.apply_ms}});
+        out["swaps"].push_back({{"s", sw.s},
+                                {"particles", {sw.record.particles_before, sw.record.particles_after}},
+                                {"fz", {sw.fz_before, sw.fz_after}},
+                                {"depth", {sw.depth_before, sw.depth_after}},
+                                {"force_offset_z", sw.record.force_offset[2]},
+                                {"exact", sw.record.exact},
+                                {"ticks", {sw.record.ask_tick, sw.record.carry_tick, sw.record.swap_tick}}});
       std::printf("%s\n", out.dump(2).c_str());
     } else {
-      std::printf("palpate-follow: %s, %g N at %g m/s from (%g, %g) to (%g, %g): %s, %ld steps, %zu refocus\n",
-                  scene_file.c_str(), force, speed, from[0], from[1], to[0], to[1], status.c_str(), k, swaps.size());
+      std::printf("palpate-follow: %s, %g N at %g m/s from (%g, %g) to (%g, %g), %s%s: %s, %ld steps, %lld refocus, %lld dropped\n",
+                  scene_file.c_str(), force, speed, from[0], from[1], to[0], to[1], background ? "background" : "inline",
+                  paced ? ", paced" : "", status.c_str(), k, static_cast<long long>(follow.refocus_count()),
+                  static_cast<long long>(follow.dropped_count()));
+      if (follow.dropped_count() > 0) std::printf("  last refocus dropped: %s\n", follow.last_error().c_str());
       std::printf("  largest jump of F_z at a swap: %.3f %% of F (at s = %.1f mm)\n", 100 * worst_jump, 1e3 * worst_jump_s);
-      std::printf("  largest step of F_z while the resolution changes (swap and blend): %.3f %% of F (at s = %.1f mm)\n",
+      std::printf("  largest step of F_z while the resolution changes (swap and fade): %.3f %% of F (at s = %.1f mm)\n",
                   100 * worst_change, 1e3 * worst_change_s);
       if (!errors.empty())
         std::printf("  depth against the references along the path: worst %.2f %%, rms %.2f %%\n", 100 * worst_error,
                     100 * std::sqrt(sum2 / errors.size()));
-      std::printf("  refocus, median ms: refine %.1f, model build %.1f, transfer weights %.1f, apply %.3f\n",
-                  cli::median(refine_ms), cli::median(build_ms), cli::median(transfer_ms), cli::median(apply_ms));
+      std::printf("  refocus, median ms: refine %.1f, model build %.1f, transfer weights %.1f, carry %.3f; ask to swap %.0f ms\n",
+                  cli::median(refine_ms), cli::median(build_ms), cli::median(weights_ms), cli::median(carry_ms),
+                  cli::median(delay_ms));
+      std::printf("  this thread per step (before_step + step), ms: median %.3f, p99 %.3f, max %.3f (%.0f %% of dt at p99)",
+                  step_median, step_p99, step_max, 100 * step_p99 / (1e3 * dt));
+      if (paced) std::printf("; %ld deadline misses", misses);
+      std::printf("\n");
     }
     return status == "ok" ? 0 : 1;
   } catch (const std::exception& e) {
