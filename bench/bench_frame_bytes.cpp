@@ -125,7 +125,7 @@ int main(int argc, char** argv) {
         std::printf("%-11s %-5s %-12s %-10s %-8s %12llu\n", p ? "yes" : "-", d ? "yes" : "-", v ? "yes" : "-",
                     contacts.c_str(), s ? "yes" : "-", static_cast<unsigned long long>(frame_bytes(frame)));
       }
-      // The derived fields' cost, as the server computes them (session.cpp: derived_for).
+      // The derived fields' cost, as the server computes them (server/frames.cpp: derived_fields).
       const palpate::Model model = palpate::build_model(palpate::load_scene(PALPATE_SOURCE_DIR "/scenes/" + scene + ".json"));
       palpate::Points x(3, model.particle_count);
       for (int i = 0; i < model.particle_count; ++i)

@@ -3,7 +3,7 @@
 // or a WebSocket (one capnp message per binary WebSocket message, capnp's
 // WebSocketMessageStream), each carrying the same two-party RPC system with the same
 // bootstrap capability. Nothing of the session logic depends on the transport: both
-// end in the one ServerImpl (server/session.h). RPC thread only.
+// end in the one ServerImpl (server/rpc_server.h). RPC thread only.
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <sys/socket.h>

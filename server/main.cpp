@@ -38,7 +38,7 @@
 #include "core/model.h"
 #include "server/agones.h"
 #include "server/connection.h"
-#include "server/session.h"
+#include "server/rpc_server.h"
 #include "server/web.h"
 
 namespace {

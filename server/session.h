@@ -1,128 +1,154 @@
 #pragma once
-// The RPC side of the server (runs on the KJ event-loop thread only):
-// ServerImpl (bootstrap), SessionImpl (one Simulation each), SubscriptionImpl.
-// Nothing here is touched by a simulation thread; they meet in Simulation
-// (sim_loop.h), whose members say which side owns them.
+// One session on the RPC thread: SessionImpl (the owner's control capability; its
+// Simulation, sim_loop.h, runs on a thread of its own), its subscriptions and its read-only
+// views (attach() without the control token). Streaming policy (docs/protocol.md, "Flow
+// control"): per subscriber {inFlight, nextDue, interval}. When the simulation publishes
+// (eventfd wake-up), the newest frame goes to every subscriber that is due and has nothing
+// in flight; a due subscriber that still has a frame in flight skips this one (drop-newest)
+// and it is counted. Nothing queues: the triple buffer holds only the newest frame, so a
+// slow viewer costs the loop and the other subscribers nothing.
 #include <cstdint>
-#include <filesystem>
 #include <list>
-#include <map>
 #include <memory>
-#include <set>
 #include <string>
+#include <vector>
 
 #include <kj/async-io.h>
 
 #include "protocol/palpate.capnp.h"
 #include "server/access.h"
+#include "server/frames.h"
 #include "server/requests.h"
 #include "server/sim_loop.h"
-#include "server/web.h"
 
 namespace palpate::server {
 
+struct ServerContext;
 class SessionImpl;
 
-// What one asker of ServerContext::health_probe saw at its previous probe. Each asker
-// (the /healthz endpoint, the Agones pinger) keeps its own, so that one's probes never
-// shorten or reset the interval another one judges. RPC thread only.
-class HealthWindow {
- private:
-  friend struct ServerContext;
-  struct Sample {
-    int64_t ticks = 0;
-    double elapsed_s = 0.0;
-    uint64_t deadline_misses = 0;
-    std::string failure;  // the verdict on the interval that ended here: empty when it held
-  };
-  std::map<uint32_t, Sample> samples_;  // by session id, at this asker's previous probe
+// How read-only views and subscriptions reach their session without keeping it alive: the
+// session clears `session` when it ends. RPC thread only.
+struct SessionLink {
+  SessionImpl* session;
 };
 
-// Shared by every connection: options, the live sessions (for shutdown) and a
-// TaskSet for fire-and-forget calls. RPC thread only.
-struct ServerContext {
-  ServerContext(kj::AsyncIoContext& io, ServerOptions options);
-  kj::AsyncIoContext& io;
-  ServerOptions options;
-  std::map<uint32_t, SessionImpl*> sessions;  // by id (random, server/access.h), starting ones included
-  // Stamped by a timer of this thread every RpcHeartbeat::kPeriodNs; the real-time loops
-  // give way when it is stale (server/deadlines.h).
-  RpcHeartbeat heartbeat;
-  uint32_t next_subscriber_id = 1;
-
-  // A new connection's bootstrap capability, with its own ConnectionState (its limits):
-  // the full PalpateServer, or, with an access token (--access-token-file), one that
-  // serves only version() and authenticate() until the token is presented.
-  capnp::Capability::Client bootstrap_for_connection();
-  // A session id no live session has (random_session_id()).
-  uint32_t new_session_id() const;
-  // A refused token or unknown session id on `connection`: counted, and the call fails
-  // with `message` after options.wrong_token_delay_ms (the delay does not hold the loop).
-  kj::Promise<void> refuse_guess(ConnectionState& connection, std::string message);
-  // Refuses the call at once when `connection` has been refused max_wrong_tokens times.
-  void check_guesses_left(const ConnectionState& connection, const char* method) const;
-
-  // Stops every simulation thread (before the event loop goes away). Waits for
-  // starts in progress to reach the end of their stage.
-  void stop_all();
-  // Closes every session (Session.close() semantics): resolves when each subscriber's
-  // done(reason) was delivered or failed.
-  kj::Promise<void> close_all(const char* reason);
-  void add_task(kj::Promise<void> task) { tasks_.add(kj::mv(task)); }
-
-  // The core a new session's real-time loop pins itself to: 1 ... n-1 in turn (-1: headless,
-  // no --pin, or a single core).
-  int next_loop_cpu(bool headless);
-
-  // /healthz (server/web.h) and the Agones health pings (server/agones.h): healthy while
-  // every running real-time session held, since the previous probe with the same
-  // `window` (or since it started), at least min_rate_fraction of its rate with at most
-  // max_miss_fraction of its ticks missing their deadline. Paused and headless sessions
-  // are not judged. Nor is an interval shorter than kMinJudgedSeconds or kMinJudgedTicks
-  // periods of the session's rate (too few ticks: one miss would be a large fraction):
-  // then the window's previous verdict on the session stands, and the next probe judges
-  // the longer interval.
-  static constexpr double kMinJudgedSeconds = 0.1;
-  static constexpr double kMinJudgedTicks = 100;
-  Probe health_probe(HealthWindow& window, double min_rate_fraction = 0.9, double max_miss_fraction = 0.05);
-
-  // A session whose last reference went while its thread was still starting
-  // (validating, reading files, building): cancelled and kept, without waiting for
-  // it, until the thread has ended; then joined and freed.
-  void adopt_starting(std::unique_ptr<Simulation> sim);
-  // Sessions adopted that way whose thread has not ended yet (they count against
-  // --max-sessions: a client cannot pile up builds by opening and leaving).
-  size_t closing_sessions() const { return closing_.size(); }
-
- private:
-  struct Closing;
-  static kj::Promise<void> wait_until_started(Closing& closing);
-  struct ErrorHandler : kj::TaskSet::ErrorHandler {
-    void taskFailed(kj::Exception&& e) override;
-  } error_handler_;
-  int next_loop_core_ = 0;  // the next real-time loop's turn (next_loop_cpu)
-  std::set<Closing*> closing_;  // declared before tasks_: a Closing (held by a task) erases itself
-  kj::TaskSet tasks_{error_handler_};
-};
-
-// The bootstrap capability, one per connection (ServerContext::bootstrap_for_connection),
-// and the ones authenticate() returns on it. `authenticated` false: only version() and
-// authenticate() are served. RPC thread only.
-class ServerImpl final : public wire::PalpateServer::Server {
+class SessionImpl final : public wire::Session::Server {
  public:
-  ServerImpl(ServerContext& ctx, std::shared_ptr<ConnectionState> connection, bool authenticated)
-      : ctx_(ctx), connection_(std::move(connection)), authenticated_(authenticated) {}
-  kj::Promise<void> version(VersionContext context) override;
-  kj::Promise<void> openSession(OpenSessionContext context) override;
-  kj::Promise<void> listScenes(ListScenesContext context) override;
-  kj::Promise<void> attach(AttachContext context) override;
-  kj::Promise<void> authenticate(AuthenticateContext context) override;
+  // Starts the session's thread on the plan; the scene is resolved and validated there.
+  // `opener`: the connection that opened it (its count of live sessions).
+  SessionImpl(ServerContext& ctx, OpenPlan plan, std::shared_ptr<ConnectionState> opener);
+
+  ~SessionImpl() noexcept(false);
+
+  // Resolves once the model is built; rejects with the error of the start (a scene
+  // error, a file refused, a failed build) as the client's message.
+  kj::Promise<void> when_ready();
+
+  void stop() { sim_->stop(); }
+  wire::Session::Client self() { return thisCap(); }
+  // Gives the opener's connection its slot back (--max-sessions-per-connection), once.
+  void release_slot();
+  const std::string& control_token() const { return control_token_; }
+  const std::shared_ptr<SessionLink>& link() const { return link_; }
+  const Simulation& simulation() const { return *sim_; }
+  bool closed() const { return closed_; }
+
+  // Every subscriber gets done(reason) and is removed; resolves when each done() was
+  // delivered or failed (a vanished client).
+  kj::Promise<void> end_subscriptions(const char* reason);
+
+  // Session.close() and the server's shutdown: the loop stops, subscribers are told.
+  kj::Promise<void> close_session(const char* reason);
+
+  static kj::Promise<void> send_done(wire::FrameSink::Client& sink, const char* reason);
+
+  // `control`: for a control reference (SessionInfo.control), else a read-only view's.
+  void fill_info(wire::SessionInfo::Builder info, bool control);
+
+  // --- Session methods -----------------------------------------------------
+
+  kj::Promise<void> setForce(SetForceContext context) override;
+  kj::Promise<void> setForceVector(SetForceVectorContext context) override;
+  kj::Promise<void> setPosition(SetPositionContext context) override;
+  kj::Promise<void> setCoupling(SetCouplingContext context) override;
+  kj::Promise<void> close(CloseContext) override;
+  kj::Promise<void> reset(ResetContext context) override;
+  kj::Promise<void> pause(PauseContext context) override;
+  kj::Promise<void> resume(ResumeContext context) override;
+  kj::Promise<void> subscribe(SubscribeContext context) override;
+  kj::Promise<void> step(StepContext context) override;
+  kj::Promise<void> stats(StatsContext context) override;
+  kj::Promise<void> status(StatusContext context) override;
+  kj::Promise<void> info(InfoContext context) override;
+
+  // The subscriber leaves (its handle released, or cancel() with `reason`: then its
+  // sink gets done(reason) after the frames already sent).
+  void unsubscribe(uint32_t id, const char* reason = nullptr);
 
  private:
-  void check_authenticated(const char* method) const;
+  struct Subscriber {
+    uint32_t id;
+    wire::FrameSink::Client sink;
+    double rate_hz;
+    int64_t interval_ns;
+    FieldRequest fields;
+    bool in_flight = false;
+    bool dead = false;
+    int64_t next_due_ns = 0;
+    uint64_t sent = 0, dropped = 0;
+    kj::Promise<void> pending = nullptr;
+  };
+
+  kj::Promise<void> watch();
+
+  static std::unique_ptr<Simulation> start(OpenPlan& plan, ServerContext& ctx);
+
+  // Every method of a closed session fails (close() itself is idempotent).
+  void check_open(const char* method);
+
+  void check_phase();
+
+  void on_wake();
+
+  void stream(const Snapshot& frame, const HapticSample* render = nullptr);
+
+  void update_wanted();
+
+  // surfaceOnly needs a surface (SessionInfo.surfaceVertices): refused, naming the field, without.
+  void check_fields(const char* field, const FieldRequest& fields);
+
+  // The frame's derived fields that `want` asks for, computed now unless they already were for
+  // this frame; null when it asks for none or the frame has no double-precision positions yet
+  // (a subscriber newer than the frame).
+  const DerivedFields* derived_for(const Snapshot& s, const FieldRequest& want);
+
+  friend class SubscriptionImpl;
+  // All members: RPC thread only (the Simulation's own members say which of its
+  // parts the session's thread touches).
   ServerContext& ctx_;
-  std::shared_ptr<ConnectionState> connection_;
-  bool authenticated_;
+  uint32_t id_;
+  std::string control_token_;                // attach() with it gives a control reference (server/access.h)
+  std::shared_ptr<ConnectionState> opener_;  // the connection that opened it (sessions_open)
+  std::shared_ptr<SessionLink> link_;        // cleared when the session ends
+  bool holds_slot_ = true;                   // counted in opener_->sessions_open
+  uint32_t logged_blow_ups_ = 0;   // recoveries already logged (on_wake)
+  std::unique_ptr<Simulation> sim_;  // declared before the watchers: destroyed after them
+  kj::Own<kj::AsyncInputStream> wake_;
+  kj::Promise<void> wake_loop_ = nullptr;
+  uint8_t wake_buffer_[8] = {};
+  Phase phase_ = Phase::starting;  // as last seen on the RPC thread
+  std::string error_;              // phase_ == failed
+  double force_limit_ = 0.0;       // N, once phase_ == ready
+  CouplingOptions coupling_;       // the coupling in effect (SessionInfo.coupling), once ready
+  bool closed_ = false;            // Session.close() or the server's shutdown
+  std::vector<uint32_t> surface_vertices_;  // SessionInfo.surfaceVertices, once ready
+  DerivedFields derived_;                    // of the newest frame that needed them
+  kj::Vector<kj::Own<kj::PromiseFulfiller<void>>> ready_waiters_;
+  kj::Own<kj::PromiseFulfiller<void>> job_;
+  std::list<Subscriber> subscribers_;
 };
+
+// A read-only view of the session behind `link` (attach() without the control token).
+wire::Session::Client read_only_view(std::shared_ptr<SessionLink> link, uint32_t id);
 
 }  // namespace palpate::server

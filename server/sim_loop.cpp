@@ -437,7 +437,7 @@ void Simulation::recover(const std::string& what) {
     last_blow_up_ = message;
     last_blow_up_tick_ = state.tick;
   }
-  // Logged by the RPC thread when a frame's recoveries count rises (session.cpp): never here.
+  // Logged by the RPC thread when a frame's recoveries count rises (server/session.cpp): never here.
 }
 
 // The frame's local models (wire LocalModel): the contact force as a function of the
