@@ -3,7 +3,8 @@
 // path for the device, the servo loop's force from a frame's local model, the
 // command-to-force latency and the rendering error of the local model against the
 // next full step. The math is in plain functions and classes (tests/haptic_test.cpp);
-// Cap'n Proto appears only at the edges (local_model_of, geometry_of, run_palpation).
+// Cap'n Proto appears only at the edges (vec3_of, local_model_of, geometry_of, run_palpation).
+// haptic.cpp holds the math, haptic_loop.cpp the client loop, haptic_report.cpp the report.
 #include <array>
 #include <cstdint>
 #include <cstdio>
@@ -19,6 +20,8 @@
 namespace palpate::haptic {
 
 using V3 = std::array<double, 3>;
+inline V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+V3 vec3_of(wire::Vec3::Reader v);
 
 // ---------------------------------------------------------------------------
 // The local model of a frame (wire LocalModel, docs/protocol.md "The local contact model").
