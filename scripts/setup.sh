@@ -11,6 +11,7 @@ packages=(
   libsuitesparse-dev          # CHOLMOD: the model build's consistent-integration solve (core) and the quasi-static FEM solve (the finite-block reference)
   libopenblas0-serial         # optimised BLAS for CHOLMOD's supernodal factorisation (4x faster than the reference BLAS)
   python3-matplotlib python3-numpy   # plots in docs/ (glue only)
+  python3-meshio              # an independent reader of the VTK export (tests/vtk_meshio_test.cpp)
   clang libclang-rt-14-dev    # fuzz/: libFuzzer (libclang_rt.fuzzer) for Debian's clang 14 (test.sh --sanitize)
   chromium                    # the browser viewer's end-to-end test (headless, tests/browser/)
   openssl                     # self-signed certificates for the TLS end-to-end test (tests/e2e/server_security_test.cpp)

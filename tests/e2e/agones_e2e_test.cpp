@@ -196,7 +196,9 @@ int pings_between(const std::vector<SidecarCall>& calls, Clock::time_point from,
 
 constexpr double kPeriodS = 0.2;  // --agones-health-seconds
 
-TEST(AgonesE2E, ReadyRetriedThenHealthWhileTheRateHoldsAndShutdownAfterTheSessions) {
+// Timing (ctest entry agones_e2e_timing, label `timing`): every judgement here is made over
+// windows of wall time (pings per period, a session holding its rate or not).
+TEST(AgonesE2ETiming, ReadyRetriedThenHealthWhileTheRateHoldsAndShutdownAfterTheSessions) {
   using namespace std::chrono_literals;
   // The server first, the sidecar a second later: /ready must be retried until it listens.
   const unsigned port = free_port();

@@ -49,9 +49,13 @@ namespace {
 using palpate::test::ProgramResult;
 using palpate::test::run_program;
 
-// Wall-clock thresholds. Sanitized builds (scripts/test.sh --sanitize) step
-// several times slower and keep freed memory in quarantine: there the rates only
-// have to show a live loop, and leaks are LeakSanitizer's job, not the RSS check's.
+// Wall-clock thresholds. The tests that judge the wall clock (rates, latencies) are in the
+// suites ServerE2ETiming and ServerWebSocketTiming: ctest entry server_e2e_timing, label
+// `timing` (tests/CMakeLists.txt, docs/robustness.md), which CI runs without failing the
+// suite; server_e2e holds the rest, which must pass anywhere. Sanitized builds
+// (scripts/test.sh --sanitize) step several times slower and keep freed memory in
+// quarantine: there the rates only have to show a live loop, and leaks are
+// LeakSanitizer's job, not the RSS check's.
 #ifdef PALPATE_SANITIZED
 constexpr double kMinRateHz = 200.0;          // real-time loop at 1 kHz, measured rate
 constexpr int64_t kMinTicksStepped = 250;     // ticks a full-rate subscriber's frames span over 1.5 s
@@ -413,7 +417,8 @@ TEST(ServerE2E, FramesCarryDisplacementAndVonMisesOnRequest) {
   EXPECT_EQ(sink.positions, 0u);
 }
 
-TEST(ServerE2E, ForceCommandReachesTheStreamWithinTwoTicks) {
+// Timing: the command crosses the RPC thread and the loop within two 1 ms ticks of wall time.
+TEST(ServerE2ETiming, ForceCommandReachesTheStreamWithinTwoTicks) {
   Client c;
   auto session = c.open(false);
   auto sink_owner = kj::heap<RecordingSink>();
@@ -687,16 +692,28 @@ TEST(ServerE2E, BlowUpIsDetectedRecoveredAndNeverStreamed) {
       // Caught by the health checks while still a body (the cube spans |x| <= 2 m).
       ASSERT_LT(f.largest_coordinate, 4.0f) << "frame at tick " << f.tick;
     }
-    // Recoveries (a checkpoint restored) cost the loop little: the bar is half the rate of
-    // a healthy session, which a loaded machine does not fail and a loop stalled by its
-    // recoveries would.
-    EXPECT_GT(achieved_rate(c, session), kMinRateHz / 2);
   }
+}
+
+// Recoveries (a checkpoint restored) cost the loop little: the real-time session of
+// BlowUpIsDetectedRecoveredAndNeverStreamed keeps half the rate of a healthy session, which
+// a loaded machine does not fail and a loop stalled by its recoveries would.
+TEST(ServerE2ETiming, BlowUpRecoveriesCostTheLoopLittle) {
+  Client c;
+  auto session = c.open(false, {"body.distribution.per_edge=8", "material.young_modulus=2e8",
+                                "integrator.allow_unstable_dt=true"});
+  auto set = session.setForceRequest();
+  set.setNewtons(100.0);
+  set.send().wait(c.ws());
+  c.pump(1000);
+  auto status_response = session.statusRequest().send().wait(c.ws());
+  EXPECT_GE(status_response.getStatus().getBlowUps(), 1u) << "no recovery: the test proves nothing";
+  EXPECT_GT(achieved_rate(c, session), kMinRateHz / 2);
 }
 
 // A client that subscribes to every tick with all positions and then never reads
 // (its thread stops running its event loop), while another session is measured.
-TEST(ServerE2E, StalledAndVanishingClientsCostOthersNothing) {
+TEST(ServerE2ETiming, StalledAndVanishingClientsCostOthersNothing) {
   StalledSubscriber<Client> stalled;
 
   Client c;
@@ -782,12 +799,19 @@ TEST(ServerE2E, GarbageBytesAndConnectionChurn) {
 // openSession validates, reads and builds on the session's thread: the RPC thread
 // keeps serving everyone meanwhile, and a client that leaves while its session is
 // still building costs nothing (no join on the RPC thread) and leaves nothing behind.
-TEST(ServerE2E, ASessionStillBuildingNeverBlocksOthersAndIsFreedWhenItsClientLeaves) {
-  Client other;  // an unrelated client, measured throughout
+// One run of that: an unrelated client measures its worst version() round trip while a
+// session builds and after its client left; the abandoned start must end by itself.
+struct AbandonedStart {
+  double while_building_ms = 0, after_leaving_ms = 0;
+  bool thread_while_building = false;  // the session's thread existed while it built
+  long baseline = 0, threads_after_leaving = 0, threads_at_end = 0;
+};
+
+AbandonedStart abandon_a_start_while_building(Client& other) {
   // The sessions of earlier tests close as the server notices their clients left.
   for (int k = 0; k < 100 && g_server->threads() > 1; ++k) other.pump(50);
-  const long baseline = g_server->threads();
-  double while_building = 0;
+  AbandonedStart r;
+  r.baseline = g_server->threads();
   auto worst_round_trip = [&other](std::chrono::milliseconds window) {
     double worst = 0;
     const auto end = std::chrono::steady_clock::now() + window;
@@ -802,34 +826,47 @@ TEST(ServerE2E, ASessionStillBuildingNeverBlocksOthersAndIsFreedWhenItsClientLea
   {
     auto leaving = std::make_unique<Client>();
     auto req = leaving->server.openSessionRequest();
-    auto r = req.initRequest();
-    r.getScene().setName("hertz_cube_graded");  // consistent integration: about 2 s to build at 17^3
-    r.initOverrides(1).set(0, "body.distribution.per_edge=17");
-    r.setHeadless(true);
+    auto rq = req.initRequest();
+    rq.getScene().setName("hertz_cube_graded");  // consistent integration: about 2 s to build at 17^3
+    rq.initOverrides(1).set(0, "body.distribution.per_edge=17");
+    rq.setHeadless(true);
     auto pending = req.send();
-    while_building = worst_round_trip(std::chrono::milliseconds(300));
-    EXPECT_LT(while_building, 250.0) << "the RPC thread waited for a session's start";
-    EXPECT_GT(g_server->threads(), baseline) << "the session's thread is building";
+    r.while_building_ms = worst_round_trip(std::chrono::milliseconds(300));
+    r.thread_while_building = g_server->threads() > r.baseline;
     // The client goes, its openSession unanswered.
   }
-  const double after_leaving = worst_round_trip(std::chrono::milliseconds(300));
-  EXPECT_LT(after_leaving, 250.0) << "the RPC thread joined a session still building";
-  const long threads_after_leaving = g_server->threads();
+  r.after_leaving_ms = worst_round_trip(std::chrono::milliseconds(300));
+  r.threads_after_leaving = g_server->threads();
   // The abandoned start ends by itself and its thread is joined and freed.
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (g_server->threads() > baseline && std::chrono::steady_clock::now() < deadline) other.pump(50);
-  EXPECT_LE(g_server->threads(), baseline) << "the abandoned session's thread was not freed";
+  while (g_server->threads() > r.baseline && std::chrono::steady_clock::now() < deadline) other.pump(50);
+  r.threads_at_end = g_server->threads();
   std::printf("worst version() round trip %.1f ms while a session builds, %.1f ms after its client left "
               "(%ld server threads then, %ld now)\n",
-              while_building, after_leaving, threads_after_leaving, g_server->threads());
+              r.while_building_ms, r.after_leaving_ms, r.threads_after_leaving, r.threads_at_end);
+  return r;
+}
+
+TEST(ServerE2E, ASessionStillBuildingNeverBlocksOthersAndIsFreedWhenItsClientLeaves) {
+  Client other;
+  const AbandonedStart r = abandon_a_start_while_building(other);
+  EXPECT_TRUE(r.thread_while_building) << "the session's thread is building";
+  EXPECT_LE(r.threads_at_end, r.baseline) << "the abandoned session's thread was not freed";
   auto session = other.open(true);  // the server still opens sessions
   auto step = session.stepRequest();
   step.setN(5);
   EXPECT_EQ(step.send().wait(other.ws()).getFrame().getTick(), 5);
 }
 
-// The default scene is validated (file reads included) and built before the server
-// listens: a broken one stops it with status 1 and the message of the scene error.
+// Timing: the same, with the RPC thread's answers held to 250 ms throughout (a join on the
+// RPC thread would cost the build's 2 s).
+TEST(ServerE2ETiming, ASessionStillBuildingNeverDelaysOthers) {
+  Client other;
+  const AbandonedStart r = abandon_a_start_while_building(other);
+  EXPECT_LT(r.while_building_ms, 250.0) << "the RPC thread waited for a session's start";
+  EXPECT_LT(r.after_leaving_ms, 250.0) << "the RPC thread joined a session still building";
+}
+
 TEST(ServerE2E, ABrokenDefaultSceneStopsTheServerBeforeItListens) {
   SceneFolder folder;
   std::string nodes;
@@ -1517,7 +1554,7 @@ TEST(ServerWebSocket, GarbageAndOversizedMessagesEndOnlyTheirConnection) {
 // A WebSocket client that subscribes to every tick's positions and never reads costs a
 // full-rate WebSocket subscriber of another session nothing (the wall-clock twin of
 // StalledAndVanishingClientsCostOthersNothing; like it, left out of sanitized runs).
-TEST(ServerWebSocket, ANeverReadingClientCostsOthersNothing) {
+TEST(ServerWebSocketTiming, ANeverReadingClientCostsOthersNothing) {
   StalledSubscriber<WsClient> stalled;
   WsFullRateSubscriber c;
   c.sink->frames.clear();

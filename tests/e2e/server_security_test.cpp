@@ -558,8 +558,9 @@ TEST(Security, TlsOnBothListeners) {
 // close() promptly, because its loops give way to a starved RPC thread
 // (Deadlines::give_way_to). The client's own thread runs above the loops' priority, so that
 // what is measured is the server's answer, not the client's wait for a core. Wall-clock:
-// not run in the sanitized builds (scripts/test.sh).
-TEST(Security, OverloadNeverStarvesControl) {
+// ctest entry server_security_timing, label `timing`; not run in the sanitized builds
+// (tests/CMakeLists.txt).
+TEST(SecurityTiming, OverloadNeverStarvesControl) {
   sched_param param{};
   param.sched_priority = 20;
   if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) != 0)
