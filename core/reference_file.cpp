@@ -1,11 +1,16 @@
 #include "core/reference_file.h"
 
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <stdexcept>
 
 #include <nlohmann/json.hpp>
+
+#include "core/mesh_reader.h"
 
 namespace palpate {
 
@@ -18,7 +23,29 @@ std::string vec_text(const Vec3& v) {
   return o.str();
 }
 
+// FNV-1a (64 bits) of the bytes of `file`, continued from `hash`; false if it cannot be read.
+bool hash_file(const std::filesystem::path& file, uint64_t& hash) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return false;
+  for (std::istreambuf_iterator<char> it(in), end; it != end; ++it) {
+    hash ^= static_cast<unsigned char>(*it);
+    hash *= 0x100000001b3ULL;
+  }
+  return true;
+}
+
 }  // namespace
+
+std::string mesh_key(const std::filesystem::path& mesh_file) {
+  uint64_t hash = 0xcbf29ce484222325ULL;
+  bool read = hash_file(mesh_file, hash);
+  if (read && mesh_file.extension() == ".node") read = hash_file(tetgen_element_file(mesh_file), hash);
+  std::string key = mesh_file.filename().string() + "#";
+  if (!read) return key + "unread";
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
+  return key + hex;
+}
 
 Eigen::Vector2d top_face_centre(const Scene& scene) {
   return 0.5 * (scene.box.min.head<2>() + scene.box.max.head<2>());
@@ -36,7 +63,13 @@ Eigen::Vector2d indenter_site(const Scene& scene) {
 std::string reference_key(const Scene& scene) {
   std::ostringstream o;
   o.precision(12);
-  o << "box=" << vec_text(scene.box.min) << vec_text(scene.box.max) << " E=" << scene.material.young_modulus
+  // The body: its box, or a mesh body without one by its file (any shape: the box would be the
+  // unused default). A mesh of a box that the scene gives shares the box's reference.
+  if (scene.box_given || scene.distribution.type != DistributionType::mesh)
+    o << "box=" << vec_text(scene.box.min) << vec_text(scene.box.max);
+  else
+    o << "mesh=" << mesh_key(scene.distribution.mesh_file);
+  o << " E=" << scene.material.young_modulus
     << " nu=" << scene.material.poisson_ratio;
   // A heterogeneous body is another problem (a homogeneous body's key is unchanged).
   for (const InclusionSpec& inc : scene.material.inclusions) {

@@ -49,9 +49,15 @@ struct Reference {
 };
 
 // The scene fields the reference depends on, as one line (box, material, fixed faces,
-// indenter radius and site); two scenes with the same key share a reference. The site is
-// "centre" for the centre of the top face (given or not), else "[x,y]".
+// indenter radius and site); two scenes with the same key share a reference. The body is
+// "box=[min][max]", or for a mesh body without a box (any shape) "mesh=" mesh_key. The site
+// is "centre" for the centre of the top face (given or not), else "[x,y]".
 std::string reference_key(const Scene& scene);
+
+// A mesh file as a reference key names it: its file name and the FNV-1a 64 hash of its bytes
+// (TetGen: the .node's then the .ele's), "palpation_dome.msh#0123456789abcdef"; "#unread" when
+// the file cannot be read. The same file in another folder (the guide's scene) has the same key.
+std::string mesh_key(const std::filesystem::path& mesh_file);
 
 // The key of the large-strain reference of the scene's block (analysis/reference.h,
 // large_strain_reference): reference_key + the law and the held tool.

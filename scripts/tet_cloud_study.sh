@@ -3,11 +3,13 @@
 # clouds"): scenes/hertz_cube_tet.json with k in {16, 20, 26, 32}, support_factor in
 # {1.05, 1.2, 1.5}, support_rule kth_distance and mean_distance, each with nodal and
 # consistent integration, at three forces of the sweep; every run's palpate-verify
-# JSON goes to OUT/raw/, one CSV row per run to OUT/tet_cloud_study.csv.
+# JSON goes to RAW/tet_cloud/, one CSV row per run to OUT/tet_cloud_study.csv.
 #
-#   scripts/tet_cloud_study.sh [--build DIR] [--out DIR] [--forces F1,F2,...] [--dt SECONDS] [--solve dynamic|static]
+#   scripts/tet_cloud_study.sh [--build DIR] [--out DIR] [--raw DIR] [--forces F1,F2,...] [--dt SECONDS]
+#                              [--solve dynamic|static]
 #
-# Defaults: build-mesh (or $BUILD_DIR), docs/verification, 10.36,82.88,279.7 N, the
+# Defaults: build-mesh (or $BUILD_DIR), docs/verification, RAW data/verification (with
+# --out alone, OUT/raw), 10.36,82.88,279.7 N, the
 # dynamic settle (RK4, damping 10 1/s) at dt = 5 ms (the rest states equal those at the
 # scene's 1 ms to 5 digits; the quasi-static solve of the MLS takes minutes per force
 # here). One job at a time, single thread: ~15 min on the shared 2-core machine.
@@ -15,6 +17,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 build=${BUILD_DIR:-build-mesh}
 out=docs/verification
+raw_root=
 forces=10.36,82.88,279.7
 dt=0.005
 solve=dynamic
@@ -22,6 +25,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --build) build=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
+    --raw) raw_root=$2; shift 2 ;;
     --forces) forces=$2; shift 2 ;;
     --dt) dt=$2; shift 2 ;;
     --solve) solve=$2; shift 2 ;;
@@ -30,8 +34,11 @@ while [ $# -gt 0 ]; do
 done
 verify=$build/bin/palpate-verify
 [ -x "$verify" ] || { echo "tet_cloud_study.sh: $verify not built" >&2; exit 2; }
-raw=$out/raw/tet_cloud
-mkdir -p "$raw"
+if [ -z "$raw_root" ]; then
+  if [ "${out%/}" = docs/verification ]; then raw_root=data/verification; else raw_root=$out/raw; fi
+fi
+raw=$raw_root/tet_cloud
+mkdir -p "$raw" "$out"
 csv=$out/tet_cloud_study.csv
 py=/usr/bin/python3
 

@@ -22,9 +22,12 @@
 # Markdown tables. Runs one job at a time (single thread); the full study takes
 # about 45 minutes on a 2-core AMD EPYC, --quick about two.
 #
-# usage: scripts/verification_study.sh [--quick] [--out DIR]
+# usage: scripts/verification_study.sh [--quick] [--out DIR] [--raw DIR]
 #   --quick    a small subset (a minute or two), to check the pipeline
-#   --out DIR  output folder (default docs/verification); raw JSON goes to DIR/raw
+#   --out DIR  tables, plots and tables.md (default docs/verification)
+#   --raw DIR  every run's JSON, in STUDY/ subfolders, and their list runs.tsv
+#              (default data/verification; with --out alone, DIR/raw, so that a trial
+#              run elsewhere leaves the stored data alone)
 # BUILD_DIR (default build) holds bin/palpate-verify, bin/palpate-stable-dt and
 # bin/palpate-bench-step; they are built there (Release) if missing.
 set -uo pipefail
@@ -32,15 +35,21 @@ cd "$(dirname "$0")/.."
 
 quick=0
 out=docs/verification
+raw=
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --quick) quick=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
+    --raw) raw=${2:?--raw needs a folder}; shift ;;
     -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "verification_study.sh: unknown option '$1'" >&2; exit 2 ;;
   esac
   shift
 done
+
+if [[ -z $raw ]]; then
+  if [[ ${out%/} == docs/verification ]]; then raw=data/verification; else raw=$out/raw; fi
+fi
 
 BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
@@ -53,8 +62,8 @@ fem_scene=scenes/hertz_cube_fem.json  # hex FEM, same block, material, indenter 
 echo "== building palpate-verify, palpate-stable-dt and palpate-bench-step (Release) in $BUILD_DIR, if stale" >&2
 BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-stable-dt palpate-bench-step >/dev/null || exit 1
 
-mkdir -p "$out/raw"
-manifest="$out/raw/runs.tsv"
+mkdir -p "$out" "$raw"
+manifest="$raw/runs.tsv"
 printf 'study\tlabel\tkind\tfile\texit\twall_s\targs\tscene\n' >"$manifest"
 started=$(date +%s)
 
@@ -63,12 +72,13 @@ log() { printf '[%5ds] %s\n' "$(($(date +%s) - started))" "$*" >&2; }
 # run STUDY LABEL KIND ARGS...: one palpate-verify (KIND=verify), palpate-stable-dt
 # (KIND=stable, or stable_body for the body's own limit measured with a 100 kg indenter)
 # or palpate-bench-step (KIND=bench) run on the scene with ARGS, JSON to
-# raw/STUDY/LABEL.KIND.json. The scene is $scene unless run_scene=FILE is set for the call.
+# $raw/STUDY/LABEL.KIND.json (runs.tsv lists it relative to $raw). The scene is $scene
+# unless run_scene=FILE is set for the call.
 run() {
   local study=$1 label=$2 kind=$3
   shift 3
-  local file="raw/$study/$label.$kind.json" exe quiet=(--quiet) scene_file=${run_scene:-$scene}
-  mkdir -p "$out/raw/$study"
+  local file="$study/$label.$kind.json" exe quiet=(--quiet) scene_file=${run_scene:-$scene}
+  mkdir -p "$raw/$study"
   case $kind in
     verify) exe=$verify ;;
     bench) exe=$bench; quiet=() ;;
@@ -77,7 +87,7 @@ run() {
   [[ $kind == stable_body ]] && set -- "$@" --set indenter.mass=100
   local t0 t1 code
   t0=$(date +%s.%N)
-  "$exe" --scene "$scene_file" --json "${quiet[@]}" "$@" >"$out/$file"
+  "$exe" --scene "$scene_file" --json "${quiet[@]}" "$@" >"$raw/$file"
   code=$?
   t1=$(date +%s.%N)
   local wall
@@ -236,7 +246,7 @@ for type in rk4 symplectic_euler implicit_euler; do
 done
 
 log "tables and plots"
-"$python" scripts/plot_verification.py "$out" || exit 1
+"$python" scripts/plot_verification.py "$out" "$raw" || exit 1
 {
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
   echo "mode: $([[ $quick == 1 ]] && echo quick || echo full)"

@@ -107,10 +107,13 @@ TEST(OffCentre, TheReferenceAtASiteIsComputedThereAndIsStifferThanAtTheCentre) {
 // --growth 1.2 --focus 0.4 0.3 0, 659 nodes), the haptic scene's model otherwise, pressed
 // to rest on the vertical guide: within 3.5 % of the stored finite-block reference at the
 // site (measured +0.7, -0.8, -2.7 %; against the centre's reference it would be -0.6,
-// -2.4, -4.9 %, and the same cloud pressed at its coarse centre is +42 ... +12 % off).
+// -2.4, -4.9 %, and the same cloud pressed at its coarse centre is +42 ... +12 % off). The
+// scene gives the box its mesh fills: a mesh body without one is a body of any shape, keyed by
+// its mesh file, and would not share the cube's reference (core/reference_file.h).
 TEST(OffCentre, AnMlsCloudRefinedAtTheSiteIsOnTheReferenceThere) {
   Scene s = parse_scene(R"({
-    "body": {"distribution": {"type": "mesh", "file": "cube_tet_site_0.4_0.3.msh"}},
+    "body": {"box": {"min": [-1, -1, -2], "max": [1, 1, 0]},
+             "distribution": {"type": "mesh", "file": "cube_tet_site_0.4_0.3.msh"}},
     "mls": {"neighbors": 26, "support_rule": "kth_distance", "support_factor": 1.05, "volumes": "mesh",
             "integration": "consistent"},
     "material": {"law": "corotational"},

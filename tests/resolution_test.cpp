@@ -2,8 +2,11 @@
 // the graded lattice that takes it when the scene gives no first_spacing.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
+#include "core/mesh_reader.h"
 #include "core/resolution.h"
 #include "core/scene.h"
 
@@ -79,6 +82,38 @@ TEST(Resolution, ASceneWhoseMeshIsStillToBeMadeCanBeReadForItsDescription) {
   const Scene s = scene_of(json, {}, SceneFiles::not_required);
   EXPECT_EQ(s.distribution.type, DistributionType::mesh);
   EXPECT_GT(required_resolution(s).contact_spacing, 0.0);
+}
+
+// A group inclusion (a physical volume of the body's mesh, docs/scene-format.md) is sized from
+// its tetrahedra: tests/data/lump_block.msh's "lump" is a ball of radius 1 cm centred at
+// (0, 0, -2 cm), meshed conformally (tests/data/lump_block.geo). Without the mesh it is left out.
+TEST(Resolution, AGroupInclusionIsSizedFromItsTetrahedra) {
+  const std::string json = R"({"body": {"distribution": {"type": "mesh", "file": "lump_block.msh"}},
+      "mls": {"volumes": "mesh"}, "indenter": {"radius": 0.01}, "verify": {"forces": [0.05, 0.262]},
+      "material": {"young_modulus": 2e4, "poisson_ratio": 0.3, "inclusions": [
+        {"sphere": {"center": [0.03, 0, -0.02], "radius": 0.006}, "young_modulus": 6e4, "poisson_ratio": 0.3},
+        {"group": "lump", "young_modulus": 8e4, "poisson_ratio": 0.45}]}})";
+  const Scene s = parse_scene(json, "test.json", PALPATE_SOURCE_DIR "/tests/data");
+  EXPECT_EQ(required_resolution(s).inclusions.size(), 1u);  // the sphere; the group needs the mesh
+  const Resolution r = required_resolution(s, read_mesh(s.distribution.mesh_file));
+  ASSERT_EQ(r.inclusions.size(), 2u);  // in the scene's order
+  EXPECT_TRUE(r.inclusions[0].group.empty());
+  EXPECT_EQ(r.inclusions[0].spacing, 0.006 / 6);
+  const RegionResolution& lump = r.inclusions[1];
+  EXPECT_EQ(lump.group, "lump");
+  EXPECT_LT((lump.center - Vec3(0, 0, -0.02)).norm(), 2e-4);  // a polyhedral ball: its centroid
+  EXPECT_NEAR(lump.radius, 0.01, 3e-4);                      // the farthest node: on the sphere
+  // 3V/A of an inscribed polyhedron is a little below the ball's radius (measured 0.0097 m).
+  EXPECT_GT(lump.spacing, 0.95 * 0.01 / 6);
+  EXPECT_LT(lump.spacing, 0.01 / 6);
+  EXPECT_GT(lump.mesh_spacing, 0.001);  // the mesh's own edge there (the .geo asks for 3 mm)
+  EXPECT_LT(lump.mesh_spacing, 0.01);
+  EXPECT_EQ(r.finest_spacing(), std::min({r.contact_spacing, 0.001, lump.spacing}));
+  // An unknown group is refused with the names the mesh has.
+  std::string typo_json = json;
+  typo_json.replace(typo_json.find("\"lump\""), 6, "\"lmup\"");
+  const Scene typo = parse_scene(typo_json, "test.json", PALPATE_SOURCE_DIR "/tests/data");
+  EXPECT_THROW(required_resolution(typo, read_mesh(typo.distribution.mesh_file)), std::runtime_error);
 }
 
 }  // namespace

@@ -12,12 +12,15 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
+#include <string>
 #include <unistd.h>
 
 #include "analysis/tet_reference.h"
 #include "core/node_cloud.h"
 #include "core/reference_file.h"
+#include "core/scene.h"
 #include "test_util.h"
 
 namespace palpate {
@@ -206,6 +209,42 @@ TEST(TetReference, TheCubeOnLinearTetrahedraApproachesTheHexReferenceFromBelow) 
     EXPECT_GT(error, -0.035) << "F = " << hex.forces[f];
   }
   std::filesystem::remove_all(levels[0].file.parent_path());
+}
+
+// A body of any shape is keyed by its mesh file (name and content hash), not by the default
+// box it does not use (issue #35: the dome's key read box=[-1,-1,-2][1,1,0]). The stored dome
+// references carry that key and are found by it; the same mesh from another folder (the
+// guide's scene) shares it; another mesh under the same name does not; a meshed box the scene
+// gives keeps its box key and shares the box's reference.
+TEST(TetReference, ABodyOfAnyShapeIsKeyedByItsMeshFile) {
+  const std::filesystem::path references = PALPATE_SOURCE_DIR "/scenes/references";
+  const Scene dome = load_scene(PALPATE_SOURCE_DIR "/scenes/palpation_dome.json");
+  const std::string key = reference_key(dome);
+  EXPECT_EQ(key.rfind("mesh=palpation_dome.msh#", 0), 0u) << key;
+  EXPECT_EQ(key.find("box="), std::string::npos) << key;
+  const std::optional<Reference> lump = find_reference(dome, references);
+  ASSERT_TRUE(lump) << "no stored reference for " << key;
+  EXPECT_EQ(lump->key, load_reference(references / "palpation_dome.json").key);
+  const Scene homogeneous =
+      load_scene(PALPATE_SOURCE_DIR "/scenes/palpation_dome.json", {{"material.inclusions", "[]"}});
+  const std::optional<Reference> plain = find_reference(homogeneous, references);
+  ASSERT_TRUE(plain) << "no stored reference for " << reference_key(homogeneous);
+  EXPECT_EQ(plain->key, load_reference(references / "palpation_dome_homogeneous.json").key);
+  EXPECT_EQ(reference_key(load_scene(PALPATE_SOURCE_DIR "/docs/guide/examples/my_tissue.json")), key);
+
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("palpate_mesh_key_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(PALPATE_SOURCE_DIR "/scenes/meshes/palpation_dome.msh", dir / "palpation_dome.msh");
+  EXPECT_EQ(mesh_key(dir / "palpation_dome.msh"), mesh_key(dome.distribution.mesh_file));
+  std::ofstream(dir / "palpation_dome.msh", std::ios::app) << "\n";  // another file, the same name
+  EXPECT_NE(mesh_key(dir / "palpation_dome.msh"), mesh_key(dome.distribution.mesh_file));
+  EXPECT_EQ(mesh_key(dir / "missing.msh"), "missing.msh#unread");
+  std::filesystem::remove_all(dir);
+
+  const Scene block = load_scene(PALPATE_SOURCE_DIR "/scenes/palpation_block.json");
+  EXPECT_EQ(reference_key(block).rfind("box=[-0.05,-0.05,-0.05][0.05,0.05,0] ", 0), 0u) << reference_key(block);
+  EXPECT_TRUE(find_reference(block, references)) << reference_key(block);
 }
 
 TEST(TetReference, RefusesABodyItCannotSolve) {

@@ -3,11 +3,14 @@
 // its verification sweep, and across every inclusion. scripts/make_mesh.sh --scene reads
 // its --shell output to size a tetrahedral mesh for the scene.
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "cli/arguments.h"
+#include "core/mesh_reader.h"
 #include "core/node_cloud.h"
 #include "core/resolution.h"
 #include "core/scene.h"
@@ -19,7 +22,9 @@ using namespace palpate;
 const char* kUsage = R"(usage: palpate-resolution --scene FILE [options]
 Prints the particle spacing the scene's tool, force sweep and inclusions ask for: three
 spacings across the smallest Hertz contact radius of verify.forces, six across the
-radius of every inclusion. The scene's mesh or node file need not exist yet.
+radius of every inclusion (a mesh group: the radius 3V/A of its tetrahedra, printed with
+the spacing the mesh has in it). The scene's mesh or node file need not exist yet: group
+inclusions are then named as not sized.
   --scene FILE      scene file (JSON)
   --set KEY=VALUE   override a scene field by its dotted path (repeatable)
   --json            one JSON object on stdout
@@ -53,7 +58,32 @@ int main(int argc, char** argv) {
     std::cerr << "palpate-resolution: " << e.what() << "\n";
     return 1;
   }
-  const Resolution res = required_resolution(scene);
+  // Group inclusions are sized from the body's mesh, when it exists (scripts/make_mesh.sh
+  // --scene asks before the mesh is made).
+  std::vector<std::string> unsized_groups;
+  std::string unsized_reason;
+  Resolution res;
+  try {
+    std::vector<std::string> groups;
+    for (const InclusionSpec& inc : scene.material.inclusions)
+      if (inc.shape == InclusionShape::group) groups.push_back(inc.group);
+    const std::filesystem::path& mesh_file = scene.distribution.mesh_file;
+    std::error_code ec;
+    if (groups.empty()) {
+      res = required_resolution(scene);
+    } else if (scene.distribution.type == DistributionType::mesh && std::filesystem::is_regular_file(mesh_file, ec)) {
+      res = required_resolution(scene, read_mesh(mesh_file));
+    } else {
+      res = required_resolution(scene);
+      unsized_groups = groups;
+      unsized_reason = scene.distribution.type == DistributionType::mesh
+                           ? "the mesh " + mesh_file.string() + " does not exist yet"
+                           : std::string("the body is not a mesh");
+    }
+  } catch (const std::exception& e) {  // a mesh that cannot be read, a group it does not have
+    std::cerr << "palpate-resolution: " << e.what() << "\n";
+    return 1;
+  }
   const Vec3 focus = graded_focus(scene);
   if (json) {
     nlohmann::json out;
@@ -65,9 +95,17 @@ int main(int argc, char** argv) {
     out["finest_spacing"] = res.finest_spacing();
     out["focus"] = {focus[0], focus[1], focus[2]};
     out["inclusions"] = nlohmann::json::array();
-    for (const RegionResolution& r : res.inclusions)
-      out["inclusions"].push_back(
-          {{"center", {r.center[0], r.center[1], r.center[2]}}, {"radius", r.radius}, {"spacing", r.spacing}});
+    for (const RegionResolution& r : res.inclusions) {
+      nlohmann::json inc = {
+          {"center", {r.center[0], r.center[1], r.center[2]}}, {"radius", r.radius}, {"spacing", r.spacing}};
+      if (!r.group.empty()) {
+        inc["group"] = r.group;
+        inc["mesh_spacing"] = r.mesh_spacing;
+      }
+      out["inclusions"].push_back(inc);
+    }
+    out["unsized_groups"] = unsized_groups;
+    if (!unsized_groups.empty()) out["unsized_because"] = unsized_reason;
     std::cout << out.dump(2) << "\n";
   } else if (shell) {
     std::printf("focus_size=%.9g\n", res.contact_spacing);
@@ -86,8 +124,18 @@ int main(int argc, char** argv) {
     std::printf("  spacing under the tool: <= %.4g m (%.0f across the contact radius)\n", res.contact_spacing,
                 kSpacingsPerContactRadius);
     for (const RegionResolution& r : res.inclusions)
-      std::printf("  inclusion at (%.4g, %.4g, %.4g), radius %.4g m: spacing <= %.4g m\n", r.center[0], r.center[1],
-                  r.center[2], r.radius, r.spacing);
+      if (r.group.empty())
+        std::printf("  inclusion at (%.4g, %.4g, %.4g), radius %.4g m: spacing <= %.4g m\n", r.center[0], r.center[1],
+                    r.center[2], r.radius, r.spacing);
+      else
+        std::printf("  inclusion group '%s' at (%.4g, %.4g, %.4g), within %.4g m, size 3V/A %.4g m: spacing <= %.4g m "
+                    "(the mesh has %.4g m there%s)\n",
+                    r.group.c_str(), r.center[0], r.center[1], r.center[2], r.radius,
+                    r.spacing * kSpacingsPerInclusionRadius, r.spacing, r.mesh_spacing,
+                    r.mesh_spacing <= r.spacing ? "" : ": refine it");
+    for (const std::string& g : unsized_groups)
+      std::printf("  inclusion group '%s': not sized, %s (a group's size is its tetrahedra's)\n", g.c_str(),
+                  unsized_reason.c_str());
     std::printf("  finest: %.4g m\n", res.finest_spacing());
   }
   return 0;

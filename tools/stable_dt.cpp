@@ -14,6 +14,7 @@
 #include "cli/arguments.h"
 #include "tools/load_scene.h"
 #include "core/model.h"
+#include "core/options.h"
 #include "core/scene.h"
 
 namespace {
@@ -29,6 +30,10 @@ Finds the largest stable time step of the scene's integrator by bisection.
   --tolerance T     stop bisecting when dt_unstable / dt_stable <= 1 + T (default 0.01)
   --json            print one JSON object on stdout (progress stays on stderr)
   --quiet           no progress on stderr
+A scene's free tool (indenter.guide "free") is held on a vertical guide for the
+measurement, and the output says so: pushed by a constant vertical force it slides
+off a curved or sloping surface (the dome) at any time step, which no dt cures and a
+trial would count as unstable. --set indenter.guide=free measures it free all the same.
 )";
 
 }  // namespace
@@ -67,11 +72,24 @@ int main(int argc, char** argv) {
   const Scene& scene = loaded->scene;
   const Model& model = loaded->model;
   if (std::isnan(force)) force = scene.verify.forces.empty() ? 150.0 : scene.verify.forces.back();
+  // The trials press with a constant vertical force: a free tool slides down a curved surface
+  // away from the site until the indentation leaves [-R, R], at every dt. The stable step is the
+  // body's and the integrator's, so the tool is guided vertically unless the caller insists.
+  Options opt = loaded->opt;
+  const bool guide_asked = std::any_of(overrides.begin(), overrides.end(),
+                                       [](const auto& o) { return o.first == "indenter.guide"; });
+  const bool guided_for_measurement = opt.tool_guide == ToolGuide::free && !guide_asked;
+  if (guided_for_measurement) opt.tool_guide = ToolGuide::vertical;
+  const char* guide_note =
+      guided_for_measurement
+          ? "the scene's free tool held on a vertical guide for the measurement (a free tool pushed down "
+            "slides off a curved surface at any dt; --set indenter.guide=free to measure it free)"
+          : (opt.tool_guide == ToolGuide::free ? "free (as asked)" : "vertical");
   const double dt_estimate = 0.3 * model.min_spacing / model.wave_speed;
   const char* integrator = to_string(scene.integrator.type);
   if (!quiet)
-    std::fprintf(stderr, "palpate-stable-dt: %s, %d particles, %s, F = %g N, %g s per trial\n", scene.name.c_str(),
-                 model.particle_count, integrator, force, duration);
+    std::fprintf(stderr, "palpate-stable-dt: %s, %d particles, %s, F = %g N, %g s per trial; tool: %s\n",
+                 scene.name.c_str(), model.particle_count, integrator, force, duration, guide_note);
 
   // The trial and the search are analysis/stability.h's (shared with palpate-stress).
   stability::TrialSpec trial;
@@ -84,7 +102,7 @@ int main(int argc, char** argv) {
   const std::string definition = stability::definition(trial);
   const auto start = std::chrono::steady_clock::now();
   const stability::Search found =
-      stability::find_stable_dt(model, loaded->opt, trial, search, [&](double dt, const stability::Trial& t) {
+      stability::find_stable_dt(model, opt, trial, search, [&](double dt, const stability::Trial& t) {
         if (!quiet) std::fprintf(stderr, "  dt = %.4e s: %s (d = %.5f m)\n", dt, t.reason.c_str(), t.final_indentation);
       });
   const double lo = found.dt_max_stable, hi = found.dt_min_unstable;
@@ -112,6 +130,8 @@ int main(int argc, char** argv) {
     out["support_factor"] = scene.mls.support_factor;
     out["hourglass"] = scene.mls.hourglass;
     out["indenter_mass"] = scene.indenter.mass;
+    out["tool_guide"] = opt.tool_guide == ToolGuide::free ? "free" : "vertical";
+    out["tool_guided_for_measurement"] = guided_for_measurement;
     out["damping"] = scene.integrator.damping;
     out["tolerance"] = tolerance;
     out["trials"] = trials;
@@ -122,6 +142,7 @@ int main(int argc, char** argv) {
     std::printf("\nstable time step, scene %s: %d particles, %s, F = %g N, %g s per trial\n", scene.name.c_str(),
                 model.particle_count, integrator, force, duration);
     std::printf("  %s\n", definition.c_str());
+    std::printf("  tool: %s\n", guide_note);
     if (std::isfinite(lo))
       std::printf("  dt_max (largest stable)   %.4e s%s\n", lo, std::isfinite(hi) ? "" : " (the ceiling: nothing failed)");
     else
@@ -132,5 +153,11 @@ int main(int argc, char** argv) {
     std::printf("  c = dt_max c_p / dx_min   %.3f  (estimate: 0.3)\n", courant);
     std::printf("  %d trials, %.1f s\n", trials, wall);
   }
+  if (!std::isfinite(lo) && opt.tool_guide == ToolGuide::free && failure == "indentation outside [-R, R]")
+    std::fprintf(stderr,
+                 "palpate-stable-dt: the free tool left [-R, R] at every dt down to %g s: it slides off the surface "
+                 "under the vertical force rather than blowing up; measure with the tool guided (leave out "
+                 "--set indenter.guide=free)\n",
+                 dt_floor);
   return std::isfinite(lo) ? 0 : 3;
 }
