@@ -86,7 +86,7 @@ ContactStiffness::ContactStiffness(const Model& model, ContactStiffnessSettings 
   const size_t tangent_size = 9 * static_cast<size_t>(model.solid == SolidKind::hex_fem ? model.hex.element_count : n);
   tangent_.tangent_F.resize(tangent_size);
   tangent_.tangent_law_factor.resize(model.solid == SolidKind::hex_fem ? 0 : tangent_size);
-  tangent_.threads.resize(1, n);  // the blocked loops' scratch (mls_forces.cpp), allocated now
+  tangent_.threads.resize(1, n);  // the blocked loops' scratch (mls_loops.h), allocated now
   diagonal_ = reference_diagonal(model);
   diagonal_inverse_.resize(n);
   movable_.resize(n);

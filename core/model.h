@@ -43,7 +43,7 @@ struct Model {
   int fixed_count = 0;
   double free_mass = 0.0;                // sum of m_i over the free particles, kg
 
-  // Blocked copy of the support domains for the vectorised force loop (mls_forces.cpp).
+  // Blocked copy of the support domains for the vectorised force loop (mls_loops.h).
   // Particles 4b ... 4b+3 form block b (lanes 0..3; lanes >= n of the last block are
   // padding with zero volume and zero weights). Slot s of a block holds the s-th
   // neighbour of each of its four particles; shorter neighbour lists are padded to the

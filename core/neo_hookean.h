@@ -1,6 +1,6 @@
 #pragma once
 // The compressible neo-Hookean law, pointwise (docs/physics.md (1.13)-(1.15)): shared by
-// the MLS solid (core/mls_forces.cpp, one particle at a time) and the neo-Hookean hex FEM
+// the MLS solid (core/laws/neo_hookean.h) and the neo-Hookean hex FEM
 // (core/hex_neo_hookean.cpp, one Gauss point at a time).
 #include <Eigen/Geometry>
 #include <cmath>

@@ -3,6 +3,7 @@
 #include <cassert>
 #include <cmath>
 
+#include "core/laws/laws.h"
 #include "core/mls_forces.h"
 #include "core/neo_hookean.h"
 
@@ -18,7 +19,7 @@ double von_mises(const Mat3& sigma) {
 Mat3 mls_cauchy_stress(const Model& model, const Mat3& F, int particle) {
   Mat3 P;
   particle_first_piola_stress(model, F, particle, P);  // (1.4), (1.6), (1.8) or (1.14), + (A-12)
-  if (model.law == MaterialLaw::linear) return P;      // the small-strain stress itself
+  if (mls::with_law(model.law, []<class Law>() { return Law::small_strain; })) return P;  // the small-strain stress itself
   const double J = F.determinant();
   // An inverted or flat particle has no Cauchy stress: report the Kirchhoff stress P F^T
   // (finite; zero for the neo-Hookean law, which exerts none there) rather than divide by J <= 0.

@@ -64,7 +64,7 @@ class ThreadPool {
 };
 
 // The threads of one State's loops (Workspace::threads): the pool of Options'
-// integrator.threads, and the scratch of the blocked MLS loops (mls_forces.cpp): on one
+// integrator.threads, and the scratch of the blocked MLS loops (mls_loops.h): on one
 // thread, positions and forces as padded rows (x, y, z, 0 per particle, 32-byte aligned;
 // two buffers, six for three directions at once); on T threads, the force buffers of
 // threads 1 ... T - 1 (thread 0 accumulates into the result, then the buffers are added

@@ -12,7 +12,9 @@
 #include <vector>
 
 #include "core/kernel.h"
+#include "core/laws/laws.h"
 #include "core/mls_forces.h"
+#include "core/mls_loops.h"
 #include "core/solid.h"
 #include "core/state.h"
 #include "core/step.h"
@@ -20,6 +22,13 @@
 
 namespace palpate {
 namespace {
+
+// Every material law's name (scene material.law), from the one list (core/laws/laws.h).
+std::vector<std::string> law_names() {
+  std::vector<std::string> names;
+  for (const auto& [name, id] : mls::material_law_names) names.emplace_back(name);
+  return names;
+}
 
 // A free cube (no fixed faces) of 6^3 jittered nodes, with optional extras.
 std::string cloud_scene(const std::string& distribution, const std::string& mls_extra = "",
@@ -748,7 +757,7 @@ TEST(MlsSolid, BlockedLoopsMatchThePerParticleLoopsWithPaddingLanes) {
   const Mat3 Q = Eigen::AngleAxisd(2.0, Vec3(1, 2, -1).normalized()).toRotationMatrix();
   const Mat3 stretch = Vec3(1.35, 0.7, 1.1).asDiagonal();
   for (const Cloud& cloud : clouds)
-    for (const std::string law : {"stvk", "corotational", "linear", "neo_hookean"})
+    for (const std::string& law : law_names())
       for (const std::string k_v : {"0", "700"})
         for (const std::string hourglass : {"", R"(, "hourglass": 0.2)"}) {
           SCOPED_TRACE(cloud.distribution + ", law " + law + ", k_v " + k_v + hourglass);
@@ -818,7 +827,7 @@ TEST(MlsSolid, MultiDirectionTangentEqualsSingleProducts) {
   const Mat3 Q = Eigen::AngleAxisd(2.0, Vec3(1, 2, -1).normalized()).toRotationMatrix();
   const Mat3 stretch = Vec3(1.35, 0.7, 1.1).asDiagonal();
   const std::string cloud = R"({"type": "jittered_grid", "per_edge": 7, "jitter": 0.3, "seed": 3})";
-  for (const std::string law : {"stvk", "corotational", "linear", "neo_hookean"})
+  for (const std::string& law : law_names())
     for (const std::string k_v : {"0", "700"})
       for (const std::string hourglass : {"", R"(, "hourglass": 0.2)"}) {
         SCOPED_TRACE("law " + law + ", k_v " + k_v + (hourglass.empty() ? "" : ", hourglass"));
@@ -843,12 +852,84 @@ TEST(MlsSolid, MultiDirectionTangentEqualsSingleProducts) {
   }
 }
 
+// A law is one unit (core/mls_law.h): a law defined here, in the test tree, runs on the same
+// loops as the shipped ones with nothing else changed. It is the linear law with twice its
+// stress, so its forces must be exactly twice the linear law's (a factor of 2 rounds exactly),
+// the per-particle loop must agree with the blocked one, and the tangent must be the finite
+// difference of the forces.
+struct TwiceLinear {
+  static constexpr MaterialLaw id = MaterialLaw::linear;  // not in MaterialLaws: only this test knows it
+  static constexpr const char* name = "twice_linear";
+  static constexpr int group = 1;
+  static constexpr int block_cost = 3;
+  static constexpr bool small_strain = true;
+  static constexpr double flops_per_particle = 32.0;
+  static double stress(const Mat3& F, double lambda, double mu, Mat3& P, Mat3& factor) {
+    const double psi = mls::Linear::stress(F, lambda, mu, P, factor);
+    P *= 2.0;
+    return 2.0 * psi;
+  }
+  static Mat3 differential(const Mat3& F, const Mat3& factor, const Mat3& dF, double lambda, double mu) {
+    return 2.0 * mls::Linear::differential(F, factor, dF, lambda, mu);
+  }
+  template <bool volume_term, int G>
+  static void weighted_stress(const Model& m, const mls::Mat3Lanes (&F)[G], const mls::Lanes (&v)[G],
+                              const mls::Lanes (&lambda)[G], const mls::Lanes (&mu)[G], mls::Mat3Lanes (&vP)[G]) {
+    mls::Linear::weighted_stress<volume_term, G>(m, F, v, lambda, mu, vP);
+    for (int g = 0; g < G; ++g)
+      for (int k = 0; k < 9; ++k) vP[g].m[k] *= 2.0;
+  }
+  template <bool volume_term, int K>
+  static void weighted_differentials(const Model& m, const mls::Mat3Lanes& F, const mls::Mat3Lanes& factor,
+                                     const mls::Mat3Lanes (&dF)[K], const mls::Lanes v, const mls::Lanes lambda,
+                                     const mls::Lanes mu, mls::Mat3Lanes (&vdP)[K]) {
+    mls::Linear::weighted_differentials<volume_term, K>(m, F, factor, dF, v, lambda, mu, vdP);
+    for (int q = 0; q < K; ++q)
+      for (int k = 0; k < 9; ++k) vdP[q].m[k] *= 2.0;
+  }
+  template <class Gradients>
+  static double iteration_flops(const Model&, const Gradients&) { return 0.0; }
+};
+
+TEST(MlsSolid, ALawDefinedInTheTestTreeRunsOnTheSameLoops) {
+  const Model m = test::model_from_json(cloud_scene(R"({"type": "jittered_grid", "per_edge": 7, "jitter": 0.3, "seed": 3})",
+                                                    "", R"(, "law": "linear")"));
+  ASSERT_TRUE(detail::uses_blocked_loops(m));
+  ASSERT_NE(m.particle_count % Model::block_width, 0) << "the last block must have padding lanes";
+  const int n = m.particle_count, blocks = static_cast<int>(m.blocks.size());
+  const Points x = m.rest_position + random_displacement(m, 0.15 / 6, 5);
+  // Forces: the blocked loop with the new law, against twice the registered linear law's.
+  Points linear(3, n), twice = Points::Zero(3, n), per_particle = Points::Zero(3, n);
+  mls_internal_forces(m, x, linear);
+  mls::internal_forces_blocked<TwiceLinear, mls::Columns, false, false>(m, 0, blocks, x.data(), twice.data());
+  EXPECT_TRUE(twice == 2.0 * linear) << "max |difference| " << (twice - 2.0 * linear).cwiseAbs().maxCoeff();
+  mls::internal_forces_per_particle<TwiceLinear>(m, x.data(), per_particle.data());
+  EXPECT_LT((per_particle - twice).cwiseAbs().maxCoeff(), 1e-12 * twice.cwiseAbs().maxCoeff());
+  // The tangent: df = (df/dx) dx against the central difference of the blocked forces.
+  std::vector<double> tangent_F(9 * static_cast<size_t>(n)), tangent_factor(9 * static_cast<size_t>(n));
+  mls::linearize_particles<TwiceLinear>(m, x, 0, n, tangent_F, tangent_factor);
+  const Points dx = random_displacement(m, 1.0, 9);
+  Points df = Points::Zero(3, n);
+  const double* in[1] = {dx.data()};
+  double* out[1] = {df.data()};
+  mls::force_differentials_blocked<TwiceLinear, mls::Columns, false, false, 1>(m, 0, blocks, tangent_F.data(),
+                                                                             tangent_factor.data(), in, out);
+  const double h = 1e-6;
+  Points plus = Points::Zero(3, n), minus = Points::Zero(3, n);
+  const Points x_plus = x + h * dx, x_minus = x - h * dx;
+  mls::internal_forces_blocked<TwiceLinear, mls::Columns, false, false>(m, 0, blocks, x_plus.data(), plus.data());
+  mls::internal_forces_blocked<TwiceLinear, mls::Columns, false, false>(m, 0, blocks, x_minus.data(), minus.data());
+  const Points difference = (plus - minus) / (2 * h);
+  EXPECT_LT((df - difference).cwiseAbs().maxCoeff(), 1e-6 * df.cwiseAbs().maxCoeff());
+}
+
+
 // Energy consistency (f = -dU/dx at every particle) and momentum conservation of every
 // law with the volume term (A-12) on the blocked loops with padding lanes (5^3 = 4 * 31 + 1
 // particles); the tests above check them law by law on 6^3 = 4 * 54 clouds, not every law
 // with the volume term.
 TEST(MlsSolid, EveryLawWithTheVolumeTermIsEnergyConsistentAndMomentumConservingWithPaddingLanes) {
-  for (const std::string law : {"stvk", "corotational", "linear", "neo_hookean"}) {
+  for (const std::string& law : law_names()) {
     SCOPED_TRACE("law " + law);
     const Model m = test::model_from_json(
         cloud_scene(R"({"type": "grid", "per_edge": 5})", "", R"(, "law": ")" + law + R"(", "volume_stiffness": 700)"));

@@ -121,7 +121,8 @@ TEST(HapticRenderer, RendersTheNewestModelAtTheNewestDevicePosition) {
   close(fd);
 }
 
-TEST(Deadlines, TheWatchdogRestsALoopThatNeverSleeps) {
+// Wall-clock tests (a suite named *Timing: ctest label `timing`, docs/robustness.md).
+TEST(DeadlinesTiming, TheWatchdogRestsALoopThatNeverSleeps) {
   // Every tick works 2 periods: the loop never sleeps, so within the 20 ms window it must rest.
   Deadlines d(1'000'000, 100'000, 20'000'000, 2'000'000);
   d.start();
@@ -138,7 +139,7 @@ TEST(Deadlines, TheWatchdogRestsALoopThatNeverSleeps) {
   EXPECT_GT(misses, 30);
 }
 
-TEST(Deadlines, ALoopInTimeNeverRests) {
+TEST(DeadlinesTiming, ALoopInTimeNeverRests) {
   Deadlines d(2'000'000, 100'000, 20'000'000, 2'000'000);
   d.start();
   for (int k = 0; k < 30; ++k) {

@@ -1,8 +1,10 @@
 // Wire scenes (protocol/palpate.capnp) and scene files share one validator:
 // protocol/scene_wire.h turns a wire scene into scene-file JSON.
 #include <capnp/message.h>
+#include <capnp/schema.h>
 #include <gtest/gtest.h>
 
+#include "core/laws/laws.h"
 #include "core/scene.h"
 #include "protocol/scene_wire.h"
 
@@ -84,6 +86,21 @@ TEST(SceneWire, MaterialLawAndVolumetricIntegrationRoundTrip) {
   scene_json_to_wire(R"({"material": {"law": "neo_hookean"}})", "t.json", neo);
   EXPECT_EQ(neo.getMaterial().getLaw(), wire::MaterialLaw::NEO_HOOKEAN);
   EXPECT_EQ(scene_from_wire(neo, "<rpc scene>", ".").material.law, MaterialLaw::neo_hookean);
+}
+
+// Every material law of the one list (core/laws/laws.h) crosses the wire by its name, and the
+// wire's MaterialLaw has no law the list lacks: adding a law to one and not the other fails here.
+TEST(SceneWire, TheWireHasEveryMaterialLawAndNoOther) {
+  EXPECT_EQ(capnp::Schema::from<wire::MaterialLaw>().getEnumerants().size(),
+            static_cast<unsigned>(mls::MaterialLaws::size));
+  for (const auto& [name, id] : mls::material_law_names) {
+    SCOPED_TRACE(std::string(name));
+    capnp::MallocMessageBuilder mb;
+    auto scene = mb.initRoot<wire::Scene>();
+    scene_json_to_wire(R"({"material": {"law": ")" + std::string(name) + R"("}})", "t.json", scene);
+    EXPECT_EQ(scene_from_wire(scene, "<rpc scene>", ".").material.law, id);
+    EXPECT_STREQ(to_string(id), std::string(name).c_str());
+  }
 }
 
 // The health checks and the envelope override cross the wire too, with the file's validation.
