@@ -13,6 +13,7 @@
 
 #include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "cli/statistics.h"
 #include "bench/multirate_study.h"
 #include "clients/haptic.h"
 #include "core/scene.h"
@@ -125,7 +126,8 @@ Args parse_args(int argc, char** argv) {
   return a;
 }
 
-double median(std::vector<double> v) { return palpate::haptic::percentile(v, 0.5); }
+// The median run's figure by nearest rank (one of the runs, never the mean of two).
+double median(const std::vector<double>& v) { return palpate::cli::quantile(v, 0.5); }
 
 // --replay-truth: the served forces against the scene stepped at the render rate, in
 // process (a headless session of the server's session thread without the local models,

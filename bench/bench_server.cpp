@@ -32,6 +32,7 @@
 
 #include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "cli/statistics.h"
 #include "clients/haptic.h"
 #include "protocol/palpate.capnp.h"
 
@@ -277,8 +278,8 @@ void churn(const std::string& address, uint32_t session_id, const std::atomic<bo
   }
 }
 
-// Nearest-rank percentiles: the clients' (clients/haptic.h), one definition for the project.
-using palpate::haptic::percentile;
+// Nearest-rank quantiles: cli/statistics.h, one definition for the project.
+using palpate::cli::quantile;
 
 }  // namespace
 
@@ -508,8 +509,8 @@ int main(int argc, char** argv) {
           late.getP99(), late.getMax(), static_cast<unsigned long long>(stats.getDeadlineMisses()), miss_ratio,
           static_cast<unsigned long long>(stats.getMissesLateStart()),
           static_cast<unsigned long long>(stats.getMissesLongStep()), number(host_steal).c_str(),
-          stats.getPinned() ? "true" : "false", static_cast<unsigned long long>(stats.getSkippedTicks()), percentile(latency_ms, 0.5),
-          percentile(latency_ms, 0.99), percentile(latency_ms, 1.0), latency_ms.size(),
+          stats.getPinned() ? "true" : "false", static_cast<unsigned long long>(stats.getSkippedTicks()), quantile(latency_ms, 0.5),
+          quantile(latency_ms, 0.99), quantile(latency_ms, 1.0), latency_ms.size(),
           static_cast<unsigned long long>(recorder.frames), static_cast<unsigned long long>(full_rate_dropped),
           list(dropped).c_str(), list(received).c_str(), stats.getBlowUps(),
           stats.getRealtimePriority() ? "true" : "false", client_fifo ? "true" : "false", a.server_cpu,
@@ -530,7 +531,7 @@ int main(int argc, char** argv) {
                   static_cast<unsigned long long>(stats.getSkippedTicks()), stats.getPinned() ? ", loop pinned" : "");
       std::printf("host steal        %.3f s of CPU taken by the hypervisor during the run (all cores)\n", host_steal);
       std::printf("command->stream   p50 %.2f ms, p99 %.2f ms, max %.2f ms (%zu commands)\n",
-                  percentile(latency_ms, 0.5), percentile(latency_ms, 0.99), percentile(latency_ms, 1.0),
+                  quantile(latency_ms, 0.5), quantile(latency_ms, 0.99), quantile(latency_ms, 1.0),
                   latency_ms.size());
       std::printf("full-rate frames  %llu received, %llu dropped\n", static_cast<unsigned long long>(recorder.frames),
                   static_cast<unsigned long long>(full_rate_dropped));

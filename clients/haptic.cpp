@@ -8,6 +8,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "cli/statistics.h"
 
 namespace palpate::haptic {
 
@@ -133,20 +134,12 @@ V3 PalpationPath::position(double t) const {
 
 // ---------------------------------------------------------------------------
 
-double percentile(std::vector<double>& v, double q) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  const double rank = std::ceil(q * static_cast<double>(v.size()));
-  const size_t k = rank < 1 ? 0 : std::min(v.size() - 1, static_cast<size_t>(rank) - 1);
-  return v[k];
-}
-
-Percentiles percentiles(std::vector<double> v) {
+Percentiles percentiles(const std::vector<double>& v) {
   Percentiles p;
   p.count = v.size();
-  p.p50 = percentile(v, 0.5);
-  p.p99 = percentile(v, 0.99);
-  p.max = percentile(v, 1.0);
+  p.p50 = cli::quantile(v, 0.5);
+  p.p99 = cli::quantile(v, 0.99);
+  p.max = cli::quantile(v, 1.0);
   return p;
 }
 

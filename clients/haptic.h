@@ -92,14 +92,13 @@ class PalpationPath {
 // ---------------------------------------------------------------------------
 // Statistics.
 
-// The q-quantile (q in [0, 1]) of v by nearest rank; NaN if v is empty. Sorts v.
-double percentile(std::vector<double>& v, double q);
-
+// The median, 99th percentile and maximum of a sample by nearest rank (cli::quantile); NaN
+// when it is empty.
 struct Percentiles {
   double p50 = 0, p99 = 0, max = 0;
   size_t count = 0;
 };
-Percentiles percentiles(std::vector<double> v);
+Percentiles percentiles(const std::vector<double>& v);
 
 // Command-to-force latency of pipelined commands on one capability. For each command
 // sent (on_send, in send order), the time to the first frame whose commandSeq >= its

@@ -5,6 +5,7 @@
 
 #include <cmath>
 
+#include "cli/statistics.h"
 #include "clients/haptic.h"
 
 namespace {
@@ -120,6 +121,23 @@ TEST(PalpationPath, RefusesBadParameters) {
   Geometry g = cube();
   g.workspace_min[2] = 5;  // empty workspace
   EXPECT_THROW(PalpationPath(g, {0, 0, 0.5}, 1.0), std::invalid_argument);
+}
+
+// The reports' percentiles (cli::quantile, nearest rank): a sample of the sample, never
+// an interpolation; q = 0 the smallest, q = 1 the largest.
+TEST(Percentiles, NearestRankOfTheSample) {
+  std::vector<double> v;
+  for (int k = 100; k >= 1; --k) v.push_back(k);  // 100 .. 1: unsorted
+  const palpate::haptic::Percentiles p = palpate::haptic::percentiles(v);
+  EXPECT_EQ(p.count, 100u);
+  EXPECT_EQ(p.p50, 50.0);
+  EXPECT_EQ(p.p99, 99.0);
+  EXPECT_EQ(p.max, 100.0);
+  EXPECT_EQ(v.front(), 100.0);  // the caller's sample is left as it was
+  EXPECT_EQ(palpate::cli::quantile({3, 1, 2}, 0.0), 1.0);
+  EXPECT_EQ(palpate::cli::quantile({1, 2}, 0.5), 1.0);  // not the mean of the two (cli::median)
+  EXPECT_EQ(palpate::cli::quantile({1, 2}, 0.51), 2.0);
+  EXPECT_TRUE(std::isnan(palpate::haptic::percentiles({}).p99));
 }
 
 LocalModel model() {
