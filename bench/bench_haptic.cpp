@@ -11,8 +11,8 @@
 #include <capnp/ez-rpc.h>
 #include <kj/async-io.h>
 
-#include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "cli/child_process.h"
 #include "cli/statistics.h"
 #include "bench/multirate_study.h"
 #include "clients/haptic.h"
@@ -177,14 +177,15 @@ void print_replay(const Args& a, const palpate::haptic::Result& run) {
 
 int main(int argc, char** argv) {
   const Args a = parse_args(argc, argv);
-  std::unique_ptr<palpate::bench::ServerProcess> child;
+  std::unique_ptr<palpate::cli::ServerProcess> child;
   std::string address = a.connect;
   if (address.empty()) {
-    child = std::make_unique<palpate::bench::ServerProcess>(
-        palpate::bench::server_path(a.server, argv[0]),
+    child = std::make_unique<palpate::cli::ServerProcess>(
+        palpate::cli::program_path(a.server, "palpate-server", argv[0]),
         std::vector<std::string>{"--scene", a.scene, "--rate", std::to_string(a.rate), "--log-level", "error"},
-        "palpate-bench-haptic");
-    address = child->address;
+        palpate::cli::ServerProcess::Options{.wait = std::chrono::seconds(120)});
+    child->exit_unless_ready("palpate-bench-haptic");
+    address = child->address();
   }
   try {
     capnp::ReaderOptions options;

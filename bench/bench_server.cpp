@@ -30,8 +30,8 @@
 #include <kj/async-io.h>
 #include <kj/timer.h>
 
-#include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "cli/child_process.h"
 #include "cli/statistics.h"
 #include "clients/haptic.h"
 #include "protocol/palpate.capnp.h"
@@ -285,15 +285,17 @@ using palpate::cli::quantile;
 
 int main(int argc, char** argv) {
   const Args a = parse_args(argc, argv);
-  std::unique_ptr<palpate::bench::ServerProcess> child;
+  std::unique_ptr<palpate::cli::ServerProcess> child;
   std::string address = a.connect;
   if (address.empty()) {
     std::vector<std::string> server_args{"--scene", a.scene, "--rate", std::to_string(a.rate), "--max-sessions",
                                          std::to_string(std::max(16, a.sessions))};
     server_args.insert(server_args.end(), a.server_args.begin(), a.server_args.end());
-    child = std::make_unique<palpate::bench::ServerProcess>(palpate::bench::server_path(a.server, argv[0]),
-                                                            server_args, "palpate-bench-server", a.server_cpu);
-    address = child->address;
+    child = std::make_unique<palpate::cli::ServerProcess>(
+        palpate::cli::program_path(a.server, "palpate-server", argv[0]), server_args,
+        palpate::cli::ServerProcess::Options{.wait = std::chrono::seconds(120), .cpu = a.server_cpu});
+    child->exit_unless_ready("palpate-bench-server");
+    address = child->address();
   }
 
   // The client plays a haptic front-end: SCHED_FIFO 5 like the server's RPC
@@ -372,7 +374,7 @@ int main(int argc, char** argv) {
 
     // Warm-up, then the measured window: a command every 50 ms.
     timer.afterDelay((a.soak > 0 ? 5000 : a.sessions > 1 ? 1000 : 500) * kj::MILLISECONDS).wait(ws);
-    const pid_t server_pid = child ? child->pid : -1;
+    const pid_t server_pid = child ? child->pid() : -1;
     const double rss_start = server_pid > 0 ? rss_mb(server_pid) : NAN;
     std::vector<double> rss_samples;
     Churn churned;
