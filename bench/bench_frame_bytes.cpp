@@ -11,8 +11,8 @@
 #include <capnp/message.h>
 #include <capnp/serialize.h>
 
-#include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "cli/child_process.h"
 #include "core/model.h"
 #include "core/scene.h"
 #include "core/stress.h"
@@ -75,13 +75,14 @@ int main(int argc, char** argv) {
   });
   if (a.scenes.empty()) a.scenes = {"hertz_cube", "hertz_cube_haptic"};
 
-  palpate::bench::ServerProcess server(palpate::bench::server_path(a.server, argv[0]),
-                                       {"--scene-dir", PALPATE_SOURCE_DIR "/scenes", "--log-level", "error"},
-                                       "palpate-bench-frame-bytes");
+  palpate::cli::ServerProcess server(palpate::cli::program_path(a.server, "palpate-server", argv[0]),
+                                     {"--scene-dir", PALPATE_SOURCE_DIR "/scenes", "--log-level", "error"},
+                                     {.wait = std::chrono::seconds(120)});
+  server.exit_unless_ready("palpate-bench-frame-bytes");
   try {
     capnp::ReaderOptions options;
     options.traversalLimitInWords = 256 * 1024 * 1024;
-    capnp::EzRpcClient client(server.address, 7420, options);
+    capnp::EzRpcClient client(server.address(), 7420, options);
     auto& ws = client.getWaitScope();
     auto bootstrap = client.getMain<PalpateServer>();
     for (const std::string& scene : a.scenes) {

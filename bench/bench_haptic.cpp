@@ -11,8 +11,9 @@
 #include <capnp/ez-rpc.h>
 #include <kj/async-io.h>
 
-#include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "cli/child_process.h"
+#include "cli/statistics.h"
 #include "bench/multirate_study.h"
 #include "clients/haptic.h"
 #include "core/scene.h"
@@ -125,7 +126,8 @@ Args parse_args(int argc, char** argv) {
   return a;
 }
 
-double median(std::vector<double> v) { return palpate::haptic::percentile(v, 0.5); }
+// The median run's figure by nearest rank (one of the runs, never the mean of two).
+double median(const std::vector<double>& v) { return palpate::cli::quantile(v, 0.5); }
 
 // --replay-truth: the served forces against the scene stepped at the render rate, in
 // process (a headless session of the server's session thread without the local models,
@@ -175,14 +177,15 @@ void print_replay(const Args& a, const palpate::haptic::Result& run) {
 
 int main(int argc, char** argv) {
   const Args a = parse_args(argc, argv);
-  std::unique_ptr<palpate::bench::ServerProcess> child;
+  std::unique_ptr<palpate::cli::ServerProcess> child;
   std::string address = a.connect;
   if (address.empty()) {
-    child = std::make_unique<palpate::bench::ServerProcess>(
-        palpate::bench::server_path(a.server, argv[0]),
+    child = std::make_unique<palpate::cli::ServerProcess>(
+        palpate::cli::program_path(a.server, "palpate-server", argv[0]),
         std::vector<std::string>{"--scene", a.scene, "--rate", std::to_string(a.rate), "--log-level", "error"},
-        "palpate-bench-haptic");
-    address = child->address;
+        palpate::cli::ServerProcess::Options{.wait = std::chrono::seconds(120)});
+    child->exit_unless_ready("palpate-bench-haptic");
+    address = child->address();
   }
   try {
     capnp::ReaderOptions options;

@@ -30,8 +30,9 @@
 #include <kj/async-io.h>
 #include <kj/timer.h>
 
-#include "bench/server_process.h"
 #include "cli/arguments.h"
+#include "cli/child_process.h"
+#include "cli/statistics.h"
 #include "clients/haptic.h"
 #include "protocol/palpate.capnp.h"
 
@@ -277,22 +278,24 @@ void churn(const std::string& address, uint32_t session_id, const std::atomic<bo
   }
 }
 
-// Nearest-rank percentiles: the clients' (clients/haptic.h), one definition for the project.
-using palpate::haptic::percentile;
+// Nearest-rank quantiles: cli/statistics.h, one definition for the project.
+using palpate::cli::quantile;
 
 }  // namespace
 
 int main(int argc, char** argv) {
   const Args a = parse_args(argc, argv);
-  std::unique_ptr<palpate::bench::ServerProcess> child;
+  std::unique_ptr<palpate::cli::ServerProcess> child;
   std::string address = a.connect;
   if (address.empty()) {
     std::vector<std::string> server_args{"--scene", a.scene, "--rate", std::to_string(a.rate), "--max-sessions",
                                          std::to_string(std::max(16, a.sessions))};
     server_args.insert(server_args.end(), a.server_args.begin(), a.server_args.end());
-    child = std::make_unique<palpate::bench::ServerProcess>(palpate::bench::server_path(a.server, argv[0]),
-                                                            server_args, "palpate-bench-server", a.server_cpu);
-    address = child->address;
+    child = std::make_unique<palpate::cli::ServerProcess>(
+        palpate::cli::program_path(a.server, "palpate-server", argv[0]), server_args,
+        palpate::cli::ServerProcess::Options{.wait = std::chrono::seconds(120), .cpu = a.server_cpu});
+    child->exit_unless_ready("palpate-bench-server");
+    address = child->address();
   }
 
   // The client plays a haptic front-end: SCHED_FIFO 5 like the server's RPC
@@ -371,7 +374,7 @@ int main(int argc, char** argv) {
 
     // Warm-up, then the measured window: a command every 50 ms.
     timer.afterDelay((a.soak > 0 ? 5000 : a.sessions > 1 ? 1000 : 500) * kj::MILLISECONDS).wait(ws);
-    const pid_t server_pid = child ? child->pid : -1;
+    const pid_t server_pid = child ? child->pid() : -1;
     const double rss_start = server_pid > 0 ? rss_mb(server_pid) : NAN;
     std::vector<double> rss_samples;
     Churn churned;
@@ -508,8 +511,8 @@ int main(int argc, char** argv) {
           late.getP99(), late.getMax(), static_cast<unsigned long long>(stats.getDeadlineMisses()), miss_ratio,
           static_cast<unsigned long long>(stats.getMissesLateStart()),
           static_cast<unsigned long long>(stats.getMissesLongStep()), number(host_steal).c_str(),
-          stats.getPinned() ? "true" : "false", static_cast<unsigned long long>(stats.getSkippedTicks()), percentile(latency_ms, 0.5),
-          percentile(latency_ms, 0.99), percentile(latency_ms, 1.0), latency_ms.size(),
+          stats.getPinned() ? "true" : "false", static_cast<unsigned long long>(stats.getSkippedTicks()), quantile(latency_ms, 0.5),
+          quantile(latency_ms, 0.99), quantile(latency_ms, 1.0), latency_ms.size(),
           static_cast<unsigned long long>(recorder.frames), static_cast<unsigned long long>(full_rate_dropped),
           list(dropped).c_str(), list(received).c_str(), stats.getBlowUps(),
           stats.getRealtimePriority() ? "true" : "false", client_fifo ? "true" : "false", a.server_cpu,
@@ -530,7 +533,7 @@ int main(int argc, char** argv) {
                   static_cast<unsigned long long>(stats.getSkippedTicks()), stats.getPinned() ? ", loop pinned" : "");
       std::printf("host steal        %.3f s of CPU taken by the hypervisor during the run (all cores)\n", host_steal);
       std::printf("command->stream   p50 %.2f ms, p99 %.2f ms, max %.2f ms (%zu commands)\n",
-                  percentile(latency_ms, 0.5), percentile(latency_ms, 0.99), percentile(latency_ms, 1.0),
+                  quantile(latency_ms, 0.5), quantile(latency_ms, 0.99), quantile(latency_ms, 1.0),
                   latency_ms.size());
       std::printf("full-rate frames  %llu received, %llu dropped\n", static_cast<unsigned long long>(recorder.frames),
                   static_cast<unsigned long long>(full_rate_dropped));

@@ -15,7 +15,8 @@ inline double median(std::vector<double> v) {
 }
 
 // The q-quantile by nearest rank (the smallest sample with at least q of them at or below
-// it), 0 < q <= 1; NaN when there are none.
+// it), q in [0, 1] (0: the smallest); NaN when there are none. The one percentile of the
+// programs' reports (palpate-follow, the haptic client's Percentiles, the benches').
 inline double quantile(std::vector<double> v, double q) {
   if (v.empty()) return NAN;
   std::sort(v.begin(), v.end());

@@ -8,7 +8,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "protocol/local_model_force.h"
+#include "cli/statistics.h"
 
 namespace palpate::haptic {
 
@@ -40,14 +40,6 @@ LocalModel local_model_of(wire::LocalModel::Reader m) {
 }
 
 double norm(const V3& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
-
-// docs/protocol.md (P.0), the server's formula (protocol/local_model_force.h).
-V3 render(const LocalModel& model, const V3& x, double max_force) {
-  V3 f;
-  protocol::local_model_force(model.origin.data(), model.force.data(), model.stiffness.data(), model.valid_radius,
-                              model.stiffness_tick >= 0, x.data(), max_force, f.data());
-  return f;
-}
 
 // ---------------------------------------------------------------------------
 
@@ -142,20 +134,12 @@ V3 PalpationPath::position(double t) const {
 
 // ---------------------------------------------------------------------------
 
-double percentile(std::vector<double>& v, double q) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  const double rank = std::ceil(q * static_cast<double>(v.size()));
-  const size_t k = rank < 1 ? 0 : std::min(v.size() - 1, static_cast<size_t>(rank) - 1);
-  return v[k];
-}
-
-Percentiles percentiles(std::vector<double> v) {
+Percentiles percentiles(const std::vector<double>& v) {
   Percentiles p;
   p.count = v.size();
-  p.p50 = percentile(v, 0.5);
-  p.p99 = percentile(v, 0.99);
-  p.max = percentile(v, 1.0);
+  p.p50 = cli::quantile(v, 0.5);
+  p.p99 = cli::quantile(v, 0.99);
+  p.max = cli::quantile(v, 1.0);
   return p;
 }
 
@@ -234,7 +218,7 @@ void RenderingError::on_frame(const Frame& f, size_t segment) {
   }
   peak_ = std::max(peak_, norm(f.render_force));
   if (have_ && f.tick == previous_.tick + 1) {
-    const V3 predicted = render(previous_.render_model, f.target, max_force_);
+    const V3 predicted = previous_.render_model.force_at(f.target, max_force_);
     const double e_local = norm(sub(f.render_force, predicted));
     const double e_hold = norm(sub(f.render_force, previous_.render_force));
     const size_t k = std::min(segment, local_.size() - 2);

@@ -15,6 +15,7 @@
 #include <kj/async.h>
 
 #include "cli/arguments.h"
+#include "protocol/local_model.h"
 #include "protocol/palpate.capnp.h"
 
 namespace palpate::haptic {
@@ -26,22 +27,13 @@ V3 vec3_of(wire::Vec3::Reader v);
 // ---------------------------------------------------------------------------
 // The local model of a frame (wire LocalModel, docs/protocol.md "The local contact model").
 
-struct LocalModel {
-  V3 origin{0, 0, 0};        // m
-  V3 force{0, 0, 0};         // N, at origin
-  std::array<double, 9> stiffness{};  // N/m, row-major: stiffness[3 i + j] = dF_i / dx_j
-  double valid_radius = 0;   // m; 0 = do not extrapolate
-  int64_t stiffness_tick = -1;  // -1: no stiffness computed yet (it is then zero)
-};
+// protocol/local_model.h, the server's struct too: origin (m), force at origin (N), stiffness
+// row-major (N/m, stiffness[3 i + j] = dF_i / dx_j), valid radius (m; 0 = do not
+// extrapolate), stiffness tick (-1: no stiffness computed yet, it is then zero). Its force at
+// the device position x, docs/protocol.md (P.0): model.force_at(x, max_force).
+using LocalModel = protocol::LocalModel<V3, std::array<double, 9>>;
 
 LocalModel local_model_of(wire::LocalModel::Reader m);
-
-// The force at device position x from a local model, docs/protocol.md (P.0):
-//   F(x) = F0 + K (x - x0),
-// with x - x0 clipped to the model's valid radius (valid radius 0: the zero-order
-// hold F0; stiffness_tick < 0: K = 0), then saturated at max_force (> 0; 0 = none)
-// by scaling the vector to that length.
-V3 render(const LocalModel& model, const V3& x, double max_force);
 
 double norm(const V3& v);
 
@@ -100,14 +92,13 @@ class PalpationPath {
 // ---------------------------------------------------------------------------
 // Statistics.
 
-// The q-quantile (q in [0, 1]) of v by nearest rank; NaN if v is empty. Sorts v.
-double percentile(std::vector<double>& v, double q);
-
+// The median, 99th percentile and maximum of a sample by nearest rank (cli::quantile); NaN
+// when it is empty.
 struct Percentiles {
   double p50 = 0, p99 = 0, max = 0;
   size_t count = 0;
 };
-Percentiles percentiles(std::vector<double> v);
+Percentiles percentiles(const std::vector<double>& v);
 
 // Command-to-force latency of pipelined commands on one capability. For each command
 // sent (on_send, in send order), the time to the first frame whose commandSeq >= its
@@ -147,7 +138,7 @@ class LatencyTracker {
 
 // The rendering error between full steps: at each frame j (in position mode, the tick
 // right after frame j-1), its renderForce F_j, the full step's force at the target x_j,
-// against (a) the local model of frame j-1 at x_j, render(model_{j-1}, x_j, max_force),
+// against (a) the local model of frame j-1 at x_j, model_{j-1}.force_at(x_j, max_force),
 // and (b) the zero-order hold F_{j-1}. Per segment: the path's segment when frame j arrived.
 // Frames whose tick came late (published over 1.5 periods after the previous one: the
 // servo loop rendered the older model for longer) are also reported apart (late()).

@@ -214,7 +214,7 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
       s.t = t;
       s.segment = static_cast<uint32_t>(path.segment_at(t));
       s.device = path.position(t);
-      s.rendered = render(inbox->newest.render_model, s.device, max_force);
+      s.rendered = inbox->newest.render_model.force_at(s.device, max_force);
       s.frame_tick = inbox->newest.tick;
       s.frame_force = inbox->newest.render_force;
       s.contact_force = inbox->contact;

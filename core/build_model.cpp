@@ -145,21 +145,21 @@ void set_material(Model& m, const MaterialSpec& mat) {
   m.wave_speed = std::sqrt((m.lame_lambda + 2 * m.lame_mu) / mat.density);
 }
 
-// The per-particle material (material_field.h): each particle's cell (its lattice cell on
-// grid and graded_grid clouds, else a cube of volume v_i) blended over the inclusions (1.16);
-// masses m_i = rho_i v_i (the volumes are the matrix's: the masses scale by rho_i / rho).
-// Sets Model::wave_speed to the fastest p-wave present.
-void set_particle_materials(Model& m, const Scene& scene, const NodeCloud& cloud) {
+// The per-particle material (material_field.h): each particle's cell (its lattice cell when
+// `on_lattice`, the cloud is a grid or graded_grid one or the hex FEM's bricks, and the cloud
+// is the whole lattice; else a cube of volume v_i) blended over the inclusions (1.16); masses
+// m_i = rho_i v_i (the volumes are the matrix's: the masses scale by rho_i / rho). `source`
+// names the scene in errors. Sets Model::wave_speed to the fastest p-wave present.
+void set_particle_materials(Model& m, const MaterialSpec& material, bool on_lattice, const NodeCloud& cloud,
+                            const std::string& source) {
   Points cell_min, cell_max;
-  const bool lattice = (scene.distribution.type == DistributionType::grid ||
-                        scene.distribution.type == DistributionType::graded_grid) &&
-                       cloud.lattice_size.prod() == m.particle_count;
+  const bool lattice = on_lattice && cloud.lattice_size.prod() == m.particle_count;
   if (lattice)
     lattice_cells(m.rest_position, cloud.lattice_size, cell_min, cell_max);
   else
     cube_cells(m.rest_position, m.volume, cell_min, cell_max);
-  MaterialField field = material_field(scene.material, cell_min, cell_max);
-  blend_group_inclusions(scene.material, cloud, scene.source, field);
+  MaterialField field = material_field(material, cell_min, cell_max);
+  blend_group_inclusions(material, cloud, source, field);
   m.particle_lambda = std::move(field.lambda);
   m.particle_mu = std::move(field.mu);
   m.particle_density = std::move(field.density);
@@ -269,7 +269,10 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
     }
   }
   m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
-  set_particle_materials(m, scene, cloud);
+  set_particle_materials(m, scene.material,
+                         scene.distribution.type == DistributionType::grid ||
+                             scene.distribution.type == DistributionType::graded_grid,
+                         cloud, scene.source);
 
   // Moment matrices and gradient weights (A-6 ... A-9, M-14, M-15):
   // A_i = sum_j w_ij x_ij x_ij^T, d_j = A_i^-1 x_ij w_ij.
@@ -337,17 +340,15 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
 // nodes' lattice volumes = the row sums of the consistent mass of trilinear bricks).
 // Heterogeneous: each element's Lame parameters from its brick's samples (1.16), each node's
 // density from its lattice cell.
-void build_hex_fem(Model& m, const HexFemSpec& spec, const MaterialSpec& material, const NodeCloud& cloud) {
+void build_hex_fem(Model& m, const HexFemSpec& spec, const MaterialSpec& material, const NodeCloud& cloud,
+                   const std::string& source) {
   m.solid = SolidKind::hex_fem;
   m.hex = hex_mesh(m.rest_position, cloud.lattice_size, m.lame_lambda, m.lame_mu, spec.formulation,
                    spec.volumetric_integration, material.inclusions.empty() ? nullptr : &material);
   m.volume = cloud.lattice_volume;
   m.mass.resize(m.particle_count);
   for (int i = 0; i < m.particle_count; ++i) m.mass[i] = m.density * m.volume[i];
-  Scene lattice_scene;  // set_particle_materials needs only the distribution type and the material
-  lattice_scene.distribution.type = DistributionType::grid;
-  lattice_scene.material = material;
-  set_particle_materials(m, lattice_scene, cloud);
+  set_particle_materials(m, material, /*on_lattice=*/true, cloud, source);  // the bricks are the lattice's cells
   m.total_volume = std::accumulate(m.volume.begin(), m.volume.end(), 0.0);
   m.min_spacing = INFINITY;
   for (const Vec3& size : m.hex.element_size) {
@@ -436,7 +437,7 @@ Model build_model(const Scene& scene, const NodeCloud& cloud) {
   if (scene.model == "mls")
     build_mls(m, scene, cloud);
   else if (scene.model == "hex_fem")
-    build_hex_fem(m, scene.hex_fem, scene.material, cloud);
+    build_hex_fem(m, scene.hex_fem, scene.material, cloud, scene.source);
   else
     throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
   set_boundary_and_indenter(m, scene, cloud);

@@ -14,7 +14,7 @@
 
 #include "cli/arguments.h"
 #include "clients/connect.h"
-#include "protocol/local_model_force.h"
+#include "protocol/local_model.h"
 #include "protocol/palpate.capnp.h"
 
 namespace {
@@ -47,10 +47,10 @@ V3 vec(wire::Vec3::Reader v) { return {v.getX(), v.getY(), v.getZ()}; }
 struct Newest {
   size_t frames = 0;
   int64_t tick = -1, publish_ns = 0;  // publish_ns: the server's CLOCK_MONOTONIC (same host only)
-  V3 tool{}, origin{}, force{};       // the tool's centre; the render model's x0 (m) and F0 (N)
-  std::array<double, 9> stiffness{};  // N/m, row-major dF_i/dx_j
-  double valid_radius = 0;            // m
-  bool has_stiffness = false;         // stiffnessTick >= 0
+  V3 tool{};                          // the tool's centre, m
+  // The frame's render model (protocol/local_model.h): x0 (m), F0 (N), the stiffness
+  // (N/m, row-major dF_i/dx_j), the valid radius (m) and the stiffness tick.
+  palpate::protocol::LocalModel<V3, std::array<double, 9>> model;
 };
 
 // The frames' receiver (a capability the server calls). Each frame() must return at once:
@@ -64,11 +64,12 @@ struct Sink final : wire::FrameSink::Server {
     newest.tick = f.getTick();
     newest.publish_ns = f.getPublishNs();
     newest.tool = vec(f.getIndenterPosition());
-    newest.origin = vec(model.getOrigin());
-    newest.force = vec(model.getForce());
-    for (unsigned i = 0; i < 9 && i < model.getStiffness().size(); ++i) newest.stiffness[i] = model.getStiffness()[i];
-    newest.valid_radius = model.getValidRadius();
-    newest.has_stiffness = model.getStiffnessTick() >= 0;
+    newest.model.origin = vec(model.getOrigin());
+    newest.model.force = vec(model.getForce());
+    for (unsigned i = 0; i < 9 && i < model.getStiffness().size(); ++i)
+      newest.model.stiffness[i] = model.getStiffness()[i];
+    newest.model.valid_radius = model.getValidRadius();
+    newest.model.stiffness_tick = model.getStiffnessTick();
     return kj::READY_NOW;
   }
   Newest& newest;
@@ -149,9 +150,7 @@ int main(int argc, char** argv) {
       command.send().detach([&refused](kj::Exception&& e) { refused = e.getDescription().cStr(); });  // pipelined
       ++sent;
       // The force for the device now: the newest frame's render model at the device's position.
-      V3 f;
-      palpate::protocol::local_model_force(newest.origin.data(), newest.force.data(), newest.stiffness.data(),
-                                           newest.valid_radius, newest.has_stiffness, x.data(), kMaxForce, f.data());
+      const V3 f = newest.model.force_at(x, kMaxForce);  // (P.0)
       peak = std::max(peak, std::hypot(f[0], f[1], f[2]));
       if (t >= next_print) {
         timespec now{};

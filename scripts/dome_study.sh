@@ -19,22 +19,20 @@
 # Writes DIR/*.msh, one palpate-verify JSON per run and DIR/summary.md (default DIR
 # build/dome_study). Resumes: a run whose output exists is skipped (FRESH=1 starts over).
 # BUILD_DIR (default build).
-set -euo pipefail
-cd "$(dirname "$0")/.."
-BUILD_DIR=${BUILD_DIR:-build}
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 out=$BUILD_DIR/dome_study
 only=all
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
     --only) only=$2; shift 2 ;;
-    *) echo "dome_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
 done
 bin=$BUILD_DIR/bin
-for tool in palpate-verify palpate-reference; do
-  [ -x "$bin/$tool" ] || { echo "dome_study.sh: $bin/$tool not built" >&2; exit 2; }
-done
+study_require "$bin/palpate-verify" "$bin/palpate-reference"
 [ "${FRESH:-0}" = 1 ] && rm -rf "$out"
 mkdir -p "$out"
 scene=scenes/palpation_dome.json
@@ -99,7 +97,7 @@ if [ "$only" = all ] || [ "$only" = mls ]; then
     verify "${variant}_s0.8" "$(realpath "$out/mls_0.8.msh")" "$(awk -v f=$factor 'BEGIN { print 0.0008 * f }')" "${set[@]}"
     verify "${variant}_s0.63" "$(realpath "$out/mls_0.63.msh")" "$(awk -v f=$factor 'BEGIN { print 0.00063 * f }')" "${set[@]}"
   done
-  /usr/bin/python3 - "$out" <<'EOF'
+  "$python" - "$out" <<'EOF'
 import json, os, sys
 out = sys.argv[1]
 forces = [r["force"] for r in json.load(open(os.path.join(out, "homogeneous_shipped.json")))["rows"]]

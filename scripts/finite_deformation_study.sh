@@ -17,27 +17,27 @@
 # Writes DIR/reference.json, one palpate-verify JSON per run and DIR/summary.csv
 # (default DIR build/finite_deformation). About 12 min on one core (the reference 2.5,
 # the two 33^3 FEM runs 3 min each). BUILD_DIR (default build).
-set -euo pipefail
-cd "$(dirname "$0")/.."
-BUILD_DIR=${BUILD_DIR:-build}
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 out=$BUILD_DIR/finite_deformation
 sets=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
     --set) sets+=(--set "$2"); shift 2 ;;
-    *) echo "finite_deformation_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
 done
 bin=$BUILD_DIR/bin
-[ -x "$bin/palpate-verify" ] || { echo "finite_deformation_study.sh: $bin/palpate-verify not built" >&2; exit 2; }
+study_require "$bin/palpate-verify"
 mkdir -p "$out"
 echo "== reference" >&2
 "$bin/palpate-reference" --scene scenes/hertz_cube_graded.json "${sets[@]}" --out "$out/reference.json"
 verify=("$bin/palpate-verify" --reference "$out/reference.json" --json --quiet "${sets[@]}")
 # The 33^3 member of the reference family (its first spacing read from the reference's
 # levels), symplectic Euler at 1 ms (stable there for nu <= 0.45).
-first33=$(/usr/bin/python3 -c 'import json, sys
+first33=$("$python" -c 'import json, sys
 print(next(l["first_spacing"] for l in json.load(open(sys.argv[1]))["levels"] if l["per_edge"] == 33))' "$out/reference.json")
 fem33=(--scene scenes/hertz_cube_graded_fem.json --per-edge 33 --set body.distribution.first_spacing=$first33
        --set integrator.type=symplectic_euler --set integrator.dt=0.001)
@@ -52,7 +52,7 @@ run mls_tet_linear --scene scenes/hertz_cube_tet.json --set integrator.dt=0.003 
 run mls_tet_corotational --scene scenes/hertz_cube_tet.json --set integrator.dt=0.003
 run fem33_linear "${fem33[@]}"
 run fem33_corotational "${fem33[@]}" --set hex_fem.formulation=corotational
-/usr/bin/python3 - "$out" <<'PY'
+"$python" - "$out" <<'PY'
 import json, os, sys
 out = sys.argv[1]
 names = ["mls_graded_linear", "mls_graded_corotational", "mls_tet_linear", "mls_tet_corotational",

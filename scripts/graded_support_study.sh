@@ -9,9 +9,9 @@
 # Writes docs/verification/graded_supports.csv (BUILD_DIR, default build); about 3 min
 # per cell on one core. Cells already in the CSV are kept and skipped, so an
 # interrupted study resumes; FRESH=1 starts the CSV over.
-set -euo pipefail
-cd "$(dirname "$0")/.."
-BUILD_DIR=${BUILD_DIR:-build}
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
+[[ ${1:-} == -h || ${1:-} == --help ]] && study_help
 SCENE=${1:-scenes/hertz_cube_graded.json}
 OUT=docs/verification/graded_supports.csv
 TMP=$(mktemp -d)
@@ -29,7 +29,7 @@ for rule in kth_distance mean_distance; do
         echo "   failed: $(tail -1 "$TMP/err")" >&2
       fi
       "$BUILD_DIR/bin/palpate-stable-dt" --scene "$SCENE" "${set_args[@]}" --json --quiet > "$TMP/s.json" 2>/dev/null || echo '{}' > "$TMP/s.json"
-      /usr/bin/python3 - "$TMP/v.json" "$TMP/s.json" "$k" "$rule" "$alpha" >> "$OUT" <<'PY'
+      "$python" - "$TMP/v.json" "$TMP/s.json" "$k" "$rule" "$alpha" >> "$OUT" <<'PY'
 import json, sys
 try: v = json.load(open(sys.argv[1]))
 except Exception: v = {"rows": []}

@@ -23,20 +23,20 @@
 # build/inclusion_study). Resumes: a run whose JSON exists is skipped (FRESH=1 starts
 # over). About 10 min for the MLS, 25 for the FEM and 6 for the family on one core.
 # BUILD_DIR (default build).
-set -euo pipefail
-cd "$(dirname "$0")/.."
-BUILD_DIR=${BUILD_DIR:-build}
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 out=$BUILD_DIR/inclusion_study
 only=all
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
     --only) only=$2; shift 2 ;;
-    *) echo "inclusion_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
 done
 bin=$BUILD_DIR/bin
-[ -x "$bin/palpate-verify" ] || { echo "inclusion_study.sh: $bin/palpate-verify not built" >&2; exit 2; }
+study_require "$bin/palpate-verify"
 [ "${FRESH:-0}" = 1 ] && rm -rf "$out"
 mkdir -p "$out"
 inc10='material.inclusions=[{"sphere":{"center":[0,0,-0.5],"radius":0.25},"young_modulus":1e5,"poisson_ratio":0.3}]'
@@ -93,7 +93,7 @@ fi
 if [ "$only" = all ] || [ "$only" = fem ]; then
   for f in corotational linear; do
     for n in 33 41; do
-      first=$(/usr/bin/python3 -c 'import json, sys
+      first=$("$python" -c 'import json, sys
 print(next(l["first_spacing"] for l in json.load(open(sys.argv[1]))["levels"] if l["per_edge"] == int(sys.argv[2])))' $ref3 $n)
       # Symplectic Euler at 1 ms: inside the envelope at 10x down to 41^3 (1.13 ms there).
       fem=(--scene scenes/hertz_cube_graded_fem.json --per-edge $n --set body.distribution.first_spacing=$first
@@ -105,7 +105,7 @@ print(next(l["first_spacing"] for l in json.load(open(sys.argv[1]))["levels"] if
   done
 fi
 
-/usr/bin/python3 - "$out" <<'PY'
+"$python" - "$out" <<'PY'
 import glob, json, os, sys
 out = sys.argv[1]
 runs = {}

@@ -22,8 +22,8 @@
 #   --out DIR     output folder (default docs/verification/lateral_scan)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
 # built there (Release) when stale, through scripts/build.sh.
-set -euo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 
 references=0
 depth=0.0012
@@ -37,17 +37,16 @@ while [[ $# -gt 0 ]]; do
     --depth) depth=${2:?--depth needs a value in m}; shift ;;
     --sites) sites_list=${2:?--sites needs a list}; shift ;;
     --out) out=${2:?--out needs a folder}; shift ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "lateral_scan_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
 [[ -n $out ]] || out=docs/verification/lateral_scan$suffix
-BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
-BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-reference >/dev/null  # Release, only if stale
+study_build palpate-verify palpate-reference
 mkdir -p "$out"
 IFS=, read -r -a sites <<< "$sites_list"
 
@@ -71,4 +70,4 @@ for x in "${sites[@]}"; do
   done
 done
 
-/usr/bin/python3 scripts/plot_lateral_scan.py "$out" "$depth"
+"$python" scripts/plot_lateral_scan.py "$out" "$depth"

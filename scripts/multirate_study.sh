@@ -13,8 +13,8 @@
 # The full study (the graded 9261-particle cube at its own 4 ms, and the haptic scene run
 # at 4 ms) takes about ten minutes on one core: most of it is the contact stiffness of
 # every coarse step, which a headless run computes at every step.
-set -euo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 
 quick=0
 out=docs/verification/multirate
@@ -22,15 +22,14 @@ while [[ $# -gt 0 ]]; do
   case "$1" in
     --quick) quick=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "multirate_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
-build=${BUILD_DIR:-build}
-BUILD_DIR="$build" scripts/build.sh palpate-bench-multirate >&2
-bin="$build/bin/palpate-bench-multirate"
+study_build palpate-bench-multirate
+bin="$BUILD_DIR/bin/palpate-bench-multirate"
 mkdir -p "$out"
 
 run() {  # name, then the program's arguments
@@ -47,4 +46,4 @@ else
   run graded --scene scenes/hertz_cube_graded.json --seconds 12
   run haptic_at_4ms --scene scenes/hertz_cube_haptic.json --model-dt 0.004 --seconds 12
 fi
-/usr/bin/python3 scripts/plot_multirate.py "$out"
+"$python" scripts/plot_multirate.py "$out"

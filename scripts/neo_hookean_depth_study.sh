@@ -22,8 +22,8 @@
 #   --out DIR     output folder (default docs/verification/neo_hookean_depth)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
 # built there (Release) when stale, through scripts/build.sh.
-set -euo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 
 recompute=0
 out=docs/verification/neo_hookean_depth
@@ -31,16 +31,15 @@ while [[ $# -gt 0 ]]; do
   case "$1" in
     --reference) recompute=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "neo_hookean_depth_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
-BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
-BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-reference >/dev/null  # Release, only if stale
+study_build palpate-verify palpate-reference
 mkdir -p "$out"
 scene=scenes/palpation_block_neo.json
 ref=scenes/references/palpation_block_large_strain.json
@@ -70,7 +69,7 @@ for law in linear corotational neo_hookean; do
     --json --quiet > "$out/tiny_$law.json" || true
 done
 
-/usr/bin/python3 - "$out" "$ref" <<'EOF'
+"$python" - "$out" "$ref" <<'EOF'
 import json, sys
 out, ref_file = sys.argv[1], sys.argv[2]
 ref = json.load(open(ref_file))

@@ -18,8 +18,8 @@
 #   --out DIR     output folder (default docs/verification/off_centre)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
 # built there (Release) when stale, through scripts/build.sh.
-set -euo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 
 references=0
 quick=0
@@ -29,16 +29,15 @@ while [[ $# -gt 0 ]]; do
     --references) references=1 ;;
     --quick) quick=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "off_centre_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
-BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
-BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-reference >/dev/null  # Release, only if stale
+study_build palpate-verify palpate-reference
 mkdir -p "$out"
 sites=("0,0" "0.4,0.3" "0.5,0")
 forces=()
@@ -76,7 +75,7 @@ for site in "${sites[@]}"; do
   fi
 done
 
-/usr/bin/python3 - "$out" <<'PY'
+"$python" - "$out" <<'PY'
 import glob, json, os, sys
 out = sys.argv[1]
 rows, md = [], []

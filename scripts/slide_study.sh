@@ -13,8 +13,8 @@
 # BUILD_DIR (default build) holds bin/palpate-slide; it is built there (Release) if missing.
 # The full study (the haptic scene and the paper's 18^3 scene, 1 m/s ... 1 mm/s at 82.88 N)
 # takes about five minutes on one core.
-set -euo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 
 quick=0
 out=docs/verification/sliding
@@ -22,15 +22,14 @@ while [[ $# -gt 0 ]]; do
   case "$1" in
     --quick) quick=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "slide_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
-BUILD_DIR=${BUILD_DIR:-build}
 slide="$BUILD_DIR/bin/palpate-slide"
-BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-slide >/dev/null  # Release, only if stale
+study_build palpate-slide
 mkdir -p "$out"
 force=82.88
 speeds=1,0.1,0.01,0.001
@@ -47,4 +46,4 @@ else
   run haptic --scene scenes/hertz_cube_haptic.json
   run uniform_18 --scene scenes/hertz_cube.json
 fi
-/usr/bin/python3 scripts/plot_slide.py "$out"
+"$python" scripts/plot_slide.py "$out"

@@ -58,10 +58,10 @@
 #   --cache DIR       the references' cache (default DIR/references of --out)
 #   --references      recompute the references into the cache even when one is found
 # Paths are relative to the repository root.
-set -euo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 
-build=${BUILD_DIR:-build}
+build=$BUILD_DIR
 scene=scenes/palpation_block.json
 symmetric=
 jobs=2
@@ -82,8 +82,8 @@ while [[ $# -gt 0 ]]; do
     --sites) sites_list=${2:?--sites needs a list}; shift ;;
     --cache) cache=${2:?--cache needs a folder}; shift ;;
     --references) references=1 ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "surface_map_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
@@ -92,9 +92,7 @@ done
 [[ -f $scene ]] || { echo "surface_map_study.sh: no scene $scene" >&2; exit 2; }
 verify="$build/bin/palpate-verify"
 reference="$build/bin/palpate-reference"
-for tool in "$verify" "$reference"; do
-  [[ -x $tool ]] || { echo "surface_map_study.sh: $tool is not built (build it first; this script compiles nothing)" >&2; exit 2; }
-done
+study_require "$verify" "$reference"  # this script compiles nothing
 name=$(basename "$scene" .json)
 [[ -z $symmetric ]] && { [[ $name == palpation_block ]] && symmetric=1 || symmetric=0; }
 cache=${cache:-$out/references}
@@ -106,7 +104,7 @@ trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$tmp"' EXIT
 # The sites, and per site its octant site under the symmetry (itself without it). The grid
 # is the top face less 1.5 R from every side wall; coordinates are printed with %.10g so
 # that a site's text is the same everywhere (file names, --site, the reference's key).
-/usr/bin/python3 - "$scene" "$symmetric" "$per_axis" "$sites_list" > "$tmp/sites.txt" <<'PY'
+"$python" - "$scene" "$symmetric" "$per_axis" "$sites_list" > "$tmp/sites.txt" <<'PY'
 import json, sys
 scene_file, symmetric, per_axis, sites_list = sys.argv[1], sys.argv[2] == "1", int(sys.argv[3]), sys.argv[4]
 scene = json.load(open(scene_file))
@@ -150,11 +148,11 @@ key() {
   local j
   j=$("$reference" --scene "$scene" --site "$1,$2" --levels 5,6,7 --json --quiet) ||
     { echo "surface_map_study.sh: no reference key at ($1, $2) (palpate-reference refused the site)" >&2; exit 2; }
-  /usr/bin/python3 -c 'import json, sys; print(json.load(sys.stdin)["key"])' <<< "$j"
+  "$python" -c 'import json, sys; print(json.load(sys.stdin)["key"])' <<< "$j"
 }
 # The stored and cached references by key.
 index_references() {
-  /usr/bin/python3 - "$@" <<'PY'
+  "$python" - "$@" <<'PY'
 import glob, json, os, sys
 for folder in sys.argv[1:]:
     for path in sorted(glob.glob(os.path.join(folder, "*.json"))):
@@ -216,7 +214,7 @@ site_reference() {
   local src=${octant_file[$ox,$oy]}
   if [[ ${site_key[$x,$y]} == "${site_key[$ox,$oy]}" ]]; then echo "$src"; return; fi
   local file="$tmp/mirrored_${x}_${y}.json"
-  /usr/bin/python3 - "$src" "${site_key[$x,$y]}" "$file" <<'PY'
+  "$python" - "$src" "${site_key[$x,$y]}" "$file" <<'PY'
 import json, sys
 src, key, dst = sys.argv[1:4]
 j = json.load(open(src))
@@ -253,7 +251,7 @@ wait
 echo "surface_map_study.sh: $(wc -l < "$tmp/pressed.txt") sites pressed in $((SECONDS - start_all)) s" >&2
 
 # The tables.
-/usr/bin/python3 - "$out" "$name" "$tmp/pressed.txt" <<'PY'
+"$python" - "$out" "$name" "$tmp/pressed.txt" <<'PY'
 import json, math, os, sys
 out, name, pressed = sys.argv[1:4]
 sites = [line.split() for line in open(pressed)]
@@ -325,4 +323,4 @@ open(os.path.join(out, name + ".md"), "w").write("\n".join(md) + "\n")
 print("\n".join(md))
 PY
 
-/usr/bin/python3 scripts/plot_surface_map.py "$out/$name.csv" "$scene" "$out/$name.png"
+"$python" scripts/plot_surface_map.py "$out/$name.csv" "$scene" "$out/$name.png"

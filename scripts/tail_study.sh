@@ -13,8 +13,8 @@
 # LOCK (optional): a file each run holds with flock(1) while it measures, so that builds
 # that take the same lock wait (the project's helpers build through /tmp/palpate-build.lock).
 # BUILD_DIR (default build) holds the programs; they are built there (Release) if missing.
-set -euo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
 
 runs=10
 seconds=60
@@ -24,14 +24,14 @@ while [[ $# -gt 0 ]]; do
     --runs) runs=${2:?--runs needs a number}; shift ;;
     --seconds) seconds=${2:?--seconds needs a number}; shift ;;
     --out) out=${2:?--out needs a folder}; shift ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "tail_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
-build=${BUILD_DIR:-build}
-BUILD_DIR="$build" scripts/build.sh palpate-server palpate-bench-server >&2
+build=$BUILD_DIR
+study_build palpate-server palpate-bench-server
 mkdir -p "$out"
 measure() {  # output file, then the benchmark's arguments
   local file=$1
@@ -48,7 +48,7 @@ for ((k = 1; k <= runs; ++k)); do
     measure "$out/${scene}_$k.json" --scene "scenes/$scene.json" --seconds "$seconds"
   done
 done
-/usr/bin/python3 - "$out" <<'PY'
+"$python" - "$out" <<'PY'
 import glob, json, os, re, statistics, sys
 folder = sys.argv[1]
 lines = ["| scene | run | ticks | misses (%) | late starts / long steps | skipped | lateness p99 (us) | step p50 / p99 (us) | steal (s) |",

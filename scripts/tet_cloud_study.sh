@@ -13,9 +13,10 @@
 # dynamic settle (RK4, damping 10 1/s) at dt = 5 ms (the rest states equal those at the
 # scene's 1 ms to 5 digits; the quasi-static solve of the MLS takes minutes per force
 # here). One job at a time, single thread: ~15 min on the shared 2-core machine.
-set -euo pipefail
-cd "$(dirname "$0")/.."
-build=${BUILD_DIR:-build-mesh}
+BUILD_DIR=${BUILD_DIR:-build-mesh}  # this study's own default (before the common preamble)
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
+build=$BUILD_DIR
 out=docs/verification
 raw_root=
 forces=10.36,82.88,279.7
@@ -29,18 +30,18 @@ while [ $# -gt 0 ]; do
     --forces) forces=$2; shift 2 ;;
     --dt) dt=$2; shift 2 ;;
     --solve) solve=$2; shift 2 ;;
-    *) echo "tet_cloud_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
 done
 verify=$build/bin/palpate-verify
-[ -x "$verify" ] || { echo "tet_cloud_study.sh: $verify not built" >&2; exit 2; }
+study_require "$verify"
 if [ -z "$raw_root" ]; then
   if [ "${out%/}" = docs/verification ]; then raw_root=data/verification; else raw_root=$out/raw; fi
 fi
 raw=$raw_root/tet_cloud
 mkdir -p "$raw" "$out"
 csv=$out/tet_cloud_study.csv
-py=/usr/bin/python3
 
 echo "rule,k,alpha,integration,particles,worst_cond,regularized,residual_nodal,residual,total_volume,box_volume,forces,err_ref,l2_ref,l2_hertz,steps,wall_s,all_at_rest" > "$csv"
 for rule in kth_distance mean_distance; do
@@ -53,7 +54,7 @@ for rule in kth_distance mean_distance; do
           --set mls.support_rule=$rule --set mls.neighbors=$k --set mls.support_factor=$alpha \
           --set mls.integration=$integration --set integrator.dt=$dt > "$raw/$label.json" || true
         end=$(date +%s.%N)
-        "$py" - "$raw/$label.json" "$rule" "$k" "$alpha" "$integration" "$start" "$end" >> "$csv" <<'EOF'
+        "$python" - "$raw/$label.json" "$rule" "$k" "$alpha" "$integration" "$start" "$end" >> "$csv" <<'EOF'
 import json, sys
 path, rule, k, alpha, integration, start, end = sys.argv[1:]
 try:

@@ -30,8 +30,9 @@
 #              run elsewhere leaves the stored data alone)
 # BUILD_DIR (default build) holds bin/palpate-verify, bin/palpate-stable-dt and
 # bin/palpate-bench-step; they are built there (Release) if missing.
-set -uo pipefail
-cd "$(dirname "$0")/.."
+# shellcheck source=SCRIPTDIR/lib/study_common.sh
+source "$(dirname "$0")/lib/study_common.sh"
+set +e  # a failed run is recorded in runs.tsv and the study goes on
 
 quick=0
 out=docs/verification
@@ -41,8 +42,8 @@ while [[ $# -gt 0 ]]; do
     --quick) quick=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
     --raw) raw=${2:?--raw needs a folder}; shift ;;
-    -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "verification_study.sh: unknown option '$1'" >&2; exit 2 ;;
+    -h|--help) study_help ;;
+    *) study_unknown_option "$1" ;;
   esac
   shift
 done
@@ -51,16 +52,14 @@ if [[ -z $raw ]]; then
   if [[ ${out%/} == docs/verification ]]; then raw=data/verification; else raw=$out/raw; fi
 fi
 
-BUILD_DIR=${BUILD_DIR:-build}
 verify="$BUILD_DIR/bin/palpate-verify"
 stable_dt="$BUILD_DIR/bin/palpate-stable-dt"
 bench="$BUILD_DIR/bin/palpate-bench-step"
-python=/usr/bin/python3  # Debian's, which sees python3-numpy and python3-matplotlib
 scene=scenes/hertz_cube.json        # MLS
 fem_scene=scenes/hertz_cube_fem.json  # hex FEM, same block, material, indenter and reference
 
 echo "== building palpate-verify, palpate-stable-dt and palpate-bench-step (Release) in $BUILD_DIR, if stale" >&2
-BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-verify palpate-stable-dt palpate-bench-step >/dev/null || exit 1
+study_build palpate-verify palpate-stable-dt palpate-bench-step || exit 1
 
 mkdir -p "$out" "$raw"
 manifest="$raw/runs.tsv"

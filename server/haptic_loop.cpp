@@ -8,23 +8,12 @@
 #include <algorithm>
 #include <cmath>
 
-#include "protocol/local_model_force.h"
+#include "protocol/local_model.h"
 #include "server/deadlines.h"
 
 namespace palpate::server {
 
 bool saturate(Vec3& f, double max_force) { return protocol::saturate_force(f.data(), max_force); }
-
-// docs/protocol.md (P.0), the formula the clients render with too (protocol/local_model_force.h).
-Vec3 render_at(const LocalModel& model, const Vec3& x, double max_force, bool* saturated) {
-  const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> stiffness = model.stiffness;
-  Vec3 f;
-  const bool clipped = protocol::local_model_force(model.origin.data(), model.force.data(), stiffness.data(),
-                                                   model.valid_radius, model.stiffness_tick >= 0, x.data(), max_force,
-                                                   f.data());
-  if (saturated != nullptr) *saturated = clipped;
-  return f;
-}
 
 RenderInput render_input_of(const Snapshot& step) {
   RenderInput in;
@@ -50,7 +39,7 @@ HapticSample render_sample(const RenderInput& model, const DeviceInput& device, 
     // is already in the step: its own target.
     const bool newer = device.seq > model.command_seq;
     s.target = newer ? device.target : model.target;
-    s.render_force = render_at(model.render_model, s.target, max_force, &s.force_saturated);
+    s.render_force = model.render_model.force_at(s.target, max_force, &s.force_saturated);  // (P.0)
     if (newer) s.command_seq = device.seq;
   } else {
     s.target = model.target;

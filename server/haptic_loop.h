@@ -59,12 +59,6 @@ struct HapticSample {
 // Scales f to max_force (> 0; 0 = no limit) when it is longer; true if it did.
 bool saturate(Vec3& f, double max_force);
 
-// The force for the device at x from a local model, docs/protocol.md (P.0):
-// F(x) = F0 + K (x - x0) with x - x0 clipped to the valid radius (radius 0 or no stiffness
-// yet: F0), then saturated at max_force (> 0; 0 = no limit) by scaling. `saturated`
-// (optional) says whether it was.
-Vec3 render_at(const LocalModel& model, const Vec3& x, double max_force, bool* saturated = nullptr);
-
 // One render tick without the thread: the sample for the newest step and device input
 // (the renderer's tick; the multirate verification, palpate-bench-multirate, calls it
 // directly). Position mode renders the step's render model at the device position

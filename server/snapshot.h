@@ -12,18 +12,14 @@
 
 #include "core/contact_stiffness.h"
 #include "core/types.h"
+#include "protocol/local_model.h"
 
 namespace palpate::server {
 
 // A force near a point, linearised: F(x) = force + stiffness (x - origin) for
-// |x - origin| <= valid_radius (wire LocalModel; docs/protocol.md).
-struct LocalModel {
-  Vec3 origin{0, 0, 0};        // m
-  Vec3 force{0, 0, 0};         // N
-  Mat3 stiffness = Mat3::Zero();  // N/m, dF/dx
-  double valid_radius = 0.0;   // m
-  int64_t stiffness_tick = -1; // tick of the state the stiffness comes from (-1: none yet)
-};
+// |x - origin| <= valid_radius (wire LocalModel, docs/protocol.md; protocol/local_model.h,
+// which the clients share): origin and force in m and N, stiffness dF/dx in N/m.
+using LocalModel = protocol::LocalModel<Vec3, Mat3>;
 
 struct Snapshot {
   int64_t tick = 0;

@@ -4,7 +4,8 @@
 # (every target has the source root on its include path).
 #
 #   core <- analysis <- tools          protocol <- server, clients <- bench (bench: the session thread too)
-#   cli: the argument helper, includable from every program
+#   cli: the programs' small helpers (header only: arguments, statistics, text files, child
+#   processes), includable from every program and test
 #   examples: the user guide's programs (docs/guide/), a user's view: the core, the protocol,
 #   the clients' connection; examples/embed_core.cpp the core alone (no networking)
 #

@@ -24,14 +24,14 @@
 
 #include <gtest/gtest.h>
 
-#include "tests/e2e/server_process.h"
-#include "tests/run_program.h"
+#include "cli/child_process.h"
+#include "tests/test_server.h"
 
 namespace palpate {
 namespace {
 
-using test::ProgramResult;
-using test::run_program;
+using cli::ProgramResult;
+using cli::run_program;
 using test::ServerProcess;
 
 const std::string kSource = PALPATE_SOURCE_DIR;

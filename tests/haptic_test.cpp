@@ -1,10 +1,11 @@
-// The client side of haptic rendering (clients/haptic.h): the palpation path, render()
-// from a local model (docs/protocol.md (P.0)), the latency matcher and the rendering
-// error, each against values worked out by hand or an independent evaluation.
+// The client side of haptic rendering (clients/haptic.h): the palpation path, the force from
+// a local model (LocalModel::force_at, docs/protocol.md (P.0)), the latency matcher and the
+// rendering error, each against values worked out by hand or an independent evaluation.
 #include <gtest/gtest.h>
 
 #include <cmath>
 
+#include "cli/statistics.h"
 #include "clients/haptic.h"
 
 namespace {
@@ -122,6 +123,23 @@ TEST(PalpationPath, RefusesBadParameters) {
   EXPECT_THROW(PalpationPath(g, {0, 0, 0.5}, 1.0), std::invalid_argument);
 }
 
+// The reports' percentiles (cli::quantile, nearest rank): a sample of the sample, never
+// an interpolation; q = 0 the smallest, q = 1 the largest.
+TEST(Percentiles, NearestRankOfTheSample) {
+  std::vector<double> v;
+  for (int k = 100; k >= 1; --k) v.push_back(k);  // 100 .. 1: unsorted
+  const palpate::haptic::Percentiles p = palpate::haptic::percentiles(v);
+  EXPECT_EQ(p.count, 100u);
+  EXPECT_EQ(p.p50, 50.0);
+  EXPECT_EQ(p.p99, 99.0);
+  EXPECT_EQ(p.max, 100.0);
+  EXPECT_EQ(v.front(), 100.0);  // the caller's sample is left as it was
+  EXPECT_EQ(palpate::cli::quantile({3, 1, 2}, 0.0), 1.0);
+  EXPECT_EQ(palpate::cli::quantile({1, 2}, 0.5), 1.0);  // not the mean of the two (cli::median)
+  EXPECT_EQ(palpate::cli::quantile({1, 2}, 0.51), 2.0);
+  EXPECT_TRUE(std::isnan(palpate::haptic::percentiles({}).p99));
+}
+
 LocalModel model() {
   LocalModel m;
   m.origin = {1, 2, 3};
@@ -135,7 +153,7 @@ LocalModel model() {
 TEST(Render, LinearInsideTheValidRadius) {
   const LocalModel m = model();
   const V3 x = {1.003, 1.998, 2.995};  // |x - x0| = 0.0062 < 0.01
-  const V3 f = palpate::haptic::render(m, x, 0);
+  const V3 f = m.force_at(x, 0);
   // F0 + K (x - x0), worked out: dx = (0.003, -0.002, -0.005).
   EXPECT_NEAR(f[0], 0.5 - 100 * 0.003 + 10 * -0.005, 1e-12);
   EXPECT_NEAR(f[1], -1 - 200 * -0.002, 1e-12);
@@ -145,26 +163,26 @@ TEST(Render, LinearInsideTheValidRadius) {
 TEST(Render, ClipsToTheValidRadiusAndHoldsWithoutOne) {
   LocalModel m = model();
   const V3 far = {1, 2, 3 - 0.5};  // 0.5 m below the origin: clipped to 0.01 m
-  const V3 f = palpate::haptic::render(m, far, 0);
-  const V3 at_radius = palpate::haptic::render(m, {1, 2, 3 - 0.01}, 0);
+  const V3 f = m.force_at(far, 0);
+  const V3 at_radius = m.force_at({1, 2, 3 - 0.01}, 0);
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(f[i], at_radius[i], 1e-12);
   EXPECT_NEAR(f[2], 10 + 1000 * 0.01, 1e-12);
   m.valid_radius = 0;  // do not extrapolate: the zero-order hold
-  EXPECT_EQ(palpate::haptic::render(m, far, 0), m.force);
+  EXPECT_EQ(m.force_at(far, 0), m.force);
   m = model();
   m.stiffness_tick = -1;  // no stiffness computed yet
-  EXPECT_EQ(palpate::haptic::render(m, {1.001, 2, 3}, 0), m.force);
+  EXPECT_EQ(m.force_at({1.001, 2, 3}, 0), m.force);
 }
 
 TEST(Render, SaturatesAtTheDeviceForceKeepingTheDirection) {
   const LocalModel m = model();
   const V3 x = {1, 2, 2.995};
-  const V3 free = palpate::haptic::render(m, x, 0);
+  const V3 free = m.force_at(x, 0);
   ASSERT_GT(palpate::haptic::norm(free), 5.0);
-  const V3 f = palpate::haptic::render(m, x, 5.0);
+  const V3 f = m.force_at(x, 5.0);
   EXPECT_NEAR(palpate::haptic::norm(f), 5.0, 1e-12);
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(f[i] / 5.0, free[i] / palpate::haptic::norm(free), 1e-12);
-  EXPECT_EQ(palpate::haptic::render(m, x, 1e6), free);  // below the limit: untouched
+  EXPECT_EQ(m.force_at(x, 1e6), free);  // below the limit: untouched
 }
 
 TEST(LatencyTracker, PairsSeqsWithTheFirstFrameReflectingThem) {
@@ -230,7 +248,7 @@ RenderingError::Frame frame(int64_t tick, const V3& x, const LocalModel& law) {
   f.tick = tick;
   f.position_mode = true;
   f.target = x;
-  f.render_force = palpate::haptic::render(law, x, 0);
+  f.render_force = law.force_at(x, 0);
   f.render_model = law;
   f.render_model.origin = x;
   f.render_model.force = f.render_force;
@@ -250,7 +268,7 @@ TEST(RenderingError, TheLocalModelOfALinearLawIsExactAndTheHoldIsNot) {
   EXPECT_NEAR(all.hold.max, std::hypot(1e-3, 0.1), 1e-12);
   EXPECT_EQ(e.segment(0).local.count, 4u);
   EXPECT_EQ(e.segment(1).local.count, 5u);
-  EXPECT_NEAR(e.peak_force(), palpate::haptic::norm(palpate::haptic::render(law, {1, 2, 3 - 9e-4}, 0)), 1e-12);
+  EXPECT_NEAR(e.peak_force(), palpate::haptic::norm(law.force_at({1, 2, 3 - 9e-4}, 0)), 1e-12);
 }
 
 TEST(RenderingError, ComparesOnlyConsecutiveTicksInPositionMode) {

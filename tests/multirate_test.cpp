@@ -1,7 +1,7 @@
-// Multirate haptics (server/haptic_loop.h): the render of a local model, the render
-// tick's choice of device position, the renderer thread, the loop's watchdog
-// (server/deadlines.h), and the multirate force against the same scene stepped at
-// the haptic rate (bench/multirate_study.h) on a small cloud.
+// Multirate haptics (server/haptic_loop.h): the force of a local model (LocalModel::force_at,
+// protocol/local_model.h), the render tick's choice of device position, the renderer thread,
+// the loop's watchdog (server/deadlines.h), and the multirate force against the same scene
+// stepped at the haptic rate (bench/multirate_study.h) on a small cloud.
 #include <sys/eventfd.h>
 #include <unistd.h>
 
@@ -28,39 +28,39 @@ LocalModel example_model() {
   return m;
 }
 
-TEST(RenderAt, IsTheLinearModelWithinItsRadius) {
+TEST(LocalModelForceAt, IsTheLinearModelWithinItsRadius) {
   const LocalModel m = example_model();
-  EXPECT_TRUE(render_at(m, m.origin, 0.0).isApprox(m.force));
+  EXPECT_TRUE(m.force_at(m.origin, 0.0).isApprox(m.force));
   const Vec3 d(0.001, -0.002, 0.003);  // |d| < 0.01
   const Vec3 expected(1.0 + (-100 * 0.001 + 10 * -0.002), -2.0 + (10 * 0.001 - 200 * -0.002), 30.0 - 1000 * 0.003);
-  EXPECT_TRUE(render_at(m, m.origin + d, 0.0).isApprox(expected, 1e-14));
+  EXPECT_TRUE(m.force_at(m.origin + d, 0.0).isApprox(expected, 1e-14));
 }
 
-TEST(RenderAt, HoldsTheForceOnTheRadiusBeyondIt) {
+TEST(LocalModelForceAt, HoldsTheForceOnTheRadiusBeyondIt) {
   const LocalModel m = example_model();
   const Vec3 far = m.origin + Vec3(0, 0, 0.05);  // 5 radii below
   const Vec3 on_radius = m.origin + Vec3(0, 0, 0.01);
-  EXPECT_TRUE(render_at(m, far, 0.0).isApprox(render_at(m, on_radius, 0.0), 1e-14));
-  EXPECT_NEAR(render_at(m, far, 0.0)[2], 30.0 - 10.0, 1e-12);
+  EXPECT_TRUE(m.force_at(far, 0.0).isApprox(m.force_at(on_radius, 0.0), 1e-14));
+  EXPECT_NEAR(m.force_at(far, 0.0)[2], 30.0 - 10.0, 1e-12);
 }
 
-TEST(RenderAt, WithoutAStiffnessOrRadiusHoldsTheForce) {
+TEST(LocalModelForceAt, WithoutAStiffnessOrRadiusHoldsTheForce) {
   LocalModel m = example_model();
   m.stiffness_tick = -1;
-  EXPECT_TRUE(render_at(m, m.origin + Vec3(0.005, 0, 0), 0.0).isApprox(m.force));
+  EXPECT_TRUE(m.force_at(m.origin + Vec3(0.005, 0, 0), 0.0).isApprox(m.force));
   m = example_model();
   m.valid_radius = 0.0;
-  EXPECT_TRUE(render_at(m, m.origin + Vec3(0.005, 0, 0), 0.0).isApprox(m.force));
+  EXPECT_TRUE(m.force_at(m.origin + Vec3(0.005, 0, 0), 0.0).isApprox(m.force));
 }
 
-TEST(RenderAt, SaturatesAtTheDevicesForceKeepingTheDirection) {
+TEST(LocalModelForceAt, SaturatesAtTheDevicesForceKeepingTheDirection) {
   const LocalModel m = example_model();
   bool saturated = false;
-  const Vec3 f = render_at(m, m.origin, 3.0, &saturated);
+  const Vec3 f = m.force_at(m.origin, 3.0, &saturated);
   EXPECT_TRUE(saturated);
   EXPECT_NEAR(f.norm(), 3.0, 1e-12);
   EXPECT_TRUE(f.normalized().isApprox(m.force.normalized()));
-  render_at(m, m.origin, 100.0, &saturated);
+  m.force_at(m.origin, 100.0, &saturated);
   EXPECT_FALSE(saturated);
 }
 
@@ -104,7 +104,7 @@ TEST(HapticRenderer, RendersTheNewestModelAtTheNewestDevicePosition) {
     renderer.offer_model(in);
     const Vec3 moved = in.target + Vec3(0.001, 0, 0);
     renderer.offer_device(moved, 4);
-    const Vec3 expected = render_at(in.render_model, moved, 0.0);
+    const Vec3 expected = in.render_model.force_at(moved, 0.0);
     bool seen = false;
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
     while (!seen && std::chrono::steady_clock::now() < deadline) {

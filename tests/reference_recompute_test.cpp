@@ -27,9 +27,9 @@
 #include <gtest/gtest.h>
 
 #include "analysis/reference.h"
+#include "cli/child_process.h"
 #include "core/reference_file.h"
 #include "core/scene.h"
-#include "tests/run_program.h"
 
 namespace palpate {
 namespace {
@@ -65,7 +65,7 @@ TEST(ReferenceRecompute, TheStoredInclusionReferenceIsWhatPalpateReferenceComput
     levels += std::to_string(stored.levels[k].per_edge);
   }
   const auto t0 = std::chrono::steady_clock::now();
-  const test::ProgramResult run = test::run_program(
+  const cli::ProgramResult run = cli::run_program(
       {PALPATE_REFERENCE_BIN, "--scene", kScene, "--levels", levels, "--json", "--quiet"},
       std::chrono::seconds(300));
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

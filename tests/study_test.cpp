@@ -17,15 +17,15 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "tests/run_program.h"
+#include "cli/child_process.h"
 
 namespace fs = std::filesystem;
 
 namespace palpate {
 namespace {
 
-using test::ProgramResult;
-using test::run_program;
+using cli::ProgramResult;
+using cli::run_program;
 
 constexpr auto kTimeout = std::chrono::seconds(300);  // a sanitized build steps ~10x slower
 

@@ -23,13 +23,13 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "cli/child_process.h"
 #include "core/model.h"
 #include "core/node_cloud.h"
 #include "core/scene.h"
 #include "core/state.h"
 #include "core/stress.h"
 #include "core/vtk_writer.h"
-#include "tests/run_program.h"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -51,7 +51,7 @@ fs::path fresh_dir(const std::string& name) {
 json read_with_meshio(const std::vector<fs::path>& files) {
   std::vector<std::string> args = {PALPATE_DEBIAN_PYTHON, kReader};
   for (const auto& f : files) args.push_back(f.string());
-  const test::ProgramResult r = test::run_program(args, std::chrono::seconds(120));
+  const cli::ProgramResult r = cli::run_program(args, std::chrono::seconds(120));
   if (r.status != 0) throw std::runtime_error("meshio could not read the files (status " + std::to_string(r.status) + "): " + r.err);
   return json::parse(r.out);
 }

@@ -4,11 +4,6 @@
 // the programs: palpate-verify --vtk, and palpate-client --headless --vtk against a real
 // server, whose files are checked against the rows the same run writes as CSV and against
 // the model rebuilt here.
-#include <fcntl.h>
-#include <poll.h>
-#include <signal.h>
-#include <sys/prctl.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -20,28 +15,28 @@
 #include <set>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "cli/child_process.h"
 #include "core/model.h"
 #include "core/node_cloud.h"
 #include "core/scene.h"
 #include "core/state.h"
 #include "core/stress.h"
 #include "core/vtk_writer.h"
+#include "tests/test_server.h"
 #include "test_util.h"
-#include "tests/run_program.h"
 
 namespace fs = std::filesystem;
 
 namespace palpate {
 namespace {
 
-using test::ProgramResult;
-using test::run_program;
+using cli::ProgramResult;
+using cli::run_program;
 
 // ---------------------------------------------------------------------------
 // A small reader of VTK XML files: elements, attributes, DataArray contents (ascii, or binary
@@ -437,51 +432,6 @@ TEST(VtkRoundTrip, InconsistentGridsAreRefusedNamingTheFile) {
 // ---------------------------------------------------------------------------
 // The programs.
 
-// palpate-server on a loopback port the system picks, for the client test.
-class Server {
- public:
-  Server() {
-    int out[2];
-    if (pipe(out) != 0) std::abort();
-    pid_ = fork();
-    if (pid_ == 0) {
-      prctl(PR_SET_PDEATHSIG, SIGKILL);
-      dup2(out[1], STDOUT_FILENO);
-      close(out[0]);
-      close(out[1]);
-      execl(PALPATE_SERVER_BIN, PALPATE_SERVER_BIN, "--listen", "127.0.0.1:0", "--scene-dir",
-            PALPATE_SOURCE_DIR "/scenes", "--log-level", "error", static_cast<char*>(nullptr));
-      _exit(127);
-    }
-    close(out[1]);
-    std::string line;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    fcntl(out[0], F_SETFL, O_NONBLOCK);
-    while (line.find('\n') == std::string::npos && std::chrono::steady_clock::now() < deadline) {
-      char buf[256];
-      const ssize_t n = read(out[0], buf, sizeof buf);
-      if (n > 0) line.append(buf, static_cast<size_t>(n));
-      else if (n == 0) break;
-      else std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    close(out[0]);
-    const auto at = line.find("listening on ");
-    if (at != std::string::npos) {
-      address_ = line.substr(at + 13);
-      while (!address_.empty() && (address_.back() == '\n' || address_.back() == '\r')) address_.pop_back();
-    }
-  }
-  ~Server() {
-    kill(pid_, SIGTERM);
-    waitpid(pid_, nullptr, 0);
-  }
-  const std::string& address() const { return address_; }
-
- private:
-  pid_t pid_ = -1;
-  std::string address_;
-};
-
 std::vector<std::vector<std::string>> read_csv(const fs::path& file) {
   std::ifstream in(file);
   std::vector<std::vector<std::string>> rows;
@@ -560,7 +510,7 @@ TEST(VtkPrograms, TheClientWritesFilesOfHeadlessRowsOnly) {
 // One scene: a full and a surface-only run of palpate-client --headless --vtk on the same
 // server, checked against the CSV of the full run and the model rebuilt here.
 void expect_client_files(const std::string& scene_name, const SceneOverrides& overrides) {
-  const Server server;
+  const test::ServerProcess server(std::vector<std::string>{});  // palpate-server, TCP only (tests/test_server.h)
   ASSERT_FALSE(server.address().empty()) << "the server did not start";
   const fs::path dir = fresh_dir("client");
   std::vector<std::string> common = {PALPATE_CLIENT_BIN, "--connect", server.address(), "--scene", scene_name,

@@ -23,10 +23,10 @@
 #include <kj/async-io.h>
 #include <kj/compat/http.h>
 
+#include "cli/child_process.h"
 #include "protocol/palpate.capnp.h"
 #include "tests/e2e/open_session.h"
-#include "tests/e2e/server_process.h"
-#include "tests/run_program.h"
+#include "tests/test_server.h"
 
 namespace {
 
@@ -321,7 +321,7 @@ TEST(AgonesE2ETiming, ReadyRetriedThenHealthWhileTheRateHoldsAndShutdownAfterThe
 
 TEST(AgonesE2E, ABadSidecarPortInTheEnvironmentIsRefused) {
   setenv("AGONES_SDK_HTTP_PORT", "http", 1);
-  const auto r = palpate::test::run_program({PALPATE_SERVER_BIN, "--agones", "--listen", "127.0.0.1:0"},
+  const auto r = palpate::cli::run_program({PALPATE_SERVER_BIN, "--agones", "--listen", "127.0.0.1:0"},
                                             std::chrono::seconds(30));
   unsetenv("AGONES_SDK_HTTP_PORT");
   EXPECT_EQ(r.status, 2);

@@ -38,16 +38,16 @@
 #include <kj/compat/http.h>
 #include <kj/timer.h>
 
+#include "cli/child_process.h"
 #include "protocol/palpate.capnp.h"
 #include "tests/e2e/open_session.h"
-#include "tests/e2e/server_process.h"
 #include "tests/e2e/ws_client.h"
-#include "tests/run_program.h"
+#include "tests/test_server.h"
 
 namespace {
 
-using palpate::test::ProgramResult;
-using palpate::test::run_program;
+using palpate::cli::ProgramResult;
+using palpate::cli::run_program;
 
 // Wall-clock thresholds. The tests that judge the wall clock (rates, latencies) are in the
 // suites ServerE2ETiming and ServerWebSocketTiming: ctest entry server_e2e_timing, label
@@ -73,7 +73,7 @@ using palpate::wire::PalpateServer;
 using palpate::wire::Session;
 
 // ---------------------------------------------------------------------------
-// The server process (tests/e2e/server_process.h).
+// The server process (tests/test_server.h).
 
 using palpate::test::ServerProcess;
 

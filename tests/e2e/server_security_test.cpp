@@ -23,18 +23,18 @@
 #include <kj/compat/tls.h>
 #include <kj/timer.h>
 
+#include "cli/child_process.h"
 #include "clients/connect.h"
 #include "tests/e2e/open_session.h"
 #include "protocol/palpate.capnp.h"
-#include "tests/e2e/server_process.h"
 #include "tests/e2e/ws_client.h"
-#include "tests/run_program.h"
+#include "tests/test_server.h"
 
 namespace {
 
 using palpate::client::ConnectOptions;
 using palpate::client::ServerConnection;
-using palpate::test::run_program;
+using palpate::cli::run_program;
 using palpate::test::ServerProcess;
 using palpate::wire::FrameSink;
 using palpate::wire::PalpateServer;
