@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -185,7 +184,7 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
       for (int b = a + 1; b < 4; ++b) L2 = std::max(L2, (raw.nodes[tet[a]] - raw.nodes[tet[b]]).squaredNorm());
     const double L = std::sqrt(L2);
     if (!(std::abs(V) > kDegenerate * L * L * L))
-      fail_at(element_file, raw.tet_line[t], name + " is degenerate: volume " + fmt(V) + " m^3 with longest edge " + fmt(L) +
+      fail_at(element_file, raw.tet_line[t], name + " is degenerate: volume " + format_number(V) + " m^3 with longest edge " + format_number(L) +
                                                  " m (|V| must exceed 1e-12 L^3): its four nodes are (nearly) in one plane");
     positive += V > 0;
     volume[t] = V;
@@ -197,7 +196,7 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
     if ((volume[t] > 0) == file_positive) continue;
     const auto& tet = raw.tets[t];
     fail_at(element_file, raw.tet_line[t],
-            "tetrahedron " + std::to_string(raw.tet_tag[t]) + " is inverted: signed volume " + fmt(volume[t]) + " m^3 (nodes " +
+            "tetrahedron " + std::to_string(raw.tet_tag[t]) + " is inverted: signed volume " + format_number(volume[t]) + " m^3 (nodes " +
                 std::to_string(raw.node_tag[tet[0]]) + " " + std::to_string(raw.node_tag[tet[1]]) + " " +
                 std::to_string(raw.node_tag[tet[2]]) + " " + std::to_string(raw.node_tag[tet[3]]) + ": seen from the fourth, the first three turn " +
                 (volume[t] > 0 ? "counterclockwise" : "clockwise") + ") while " +
@@ -246,7 +245,7 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
     if (X.col(order[k]) == X.col(order[k - 1])) {
       const int64_t a = std::min(order[k], order[k - 1]), b = std::max(order[k], order[k - 1]);
       fail_at(node_file, kept_line[b], "this node coincides with the node at line " + std::to_string(kept_line[a]) + " (" +
-                                    fmt(X(0, a)) + ", " + fmt(X(1, a)) + ", " + fmt(X(2, a)) + ")");
+                                    format_number(X(0, a)) + ", " + format_number(X(1, a)) + ", " + format_number(X(2, a)) + ")");
     }
 
   // One body: the tetrahedra connected through shared faces.
@@ -283,11 +282,9 @@ TetMesh assemble(RawMesh raw, const std::string& node_file, const std::string& e
     }
     const double round_off = 1e-12 * static_cast<double>(mesh.boundary_faces.size()) * L * L * L;
     if (!(std::abs(enclosed - mesh.total_volume) <= 1e-6 * mesh.total_volume + round_off)) {
-      std::ostringstream o;
-      o << element_file << ": the tetrahedra overlap: they hold " << mesh.total_volume
-        << " m^3 but their boundary encloses " << enclosed
-        << " m^3 (tetrahedra that interpenetrate or fold over one another without sharing faces)";
-      throw std::runtime_error(o.str());
+      throw std::runtime_error(element_file + ": the tetrahedra overlap: they hold " + format_number(mesh.total_volume) +
+                               " m^3 but their boundary encloses " + format_number(enclosed) +
+                               " m^3 (tetrahedra that interpenetrate or fold over one another without sharing faces)");
     }
   }
 

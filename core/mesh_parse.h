@@ -20,15 +20,13 @@
 #include <vector>
 
 #include "core/mesh_reader.h"
+#include "core/number_format.h"
 #include "core/types.h"
 
 namespace palpate::mesh_io {
 
 // Coordinates beyond this are refused: volumes of larger values could overflow.
 inline constexpr double kMaxCoordinate = 1e12;  // m
-
-// A number for a message (mesh_reader.cpp).
-std::string fmt(double x);
 
 // The text of a token for a message: at most 40 bytes, control bytes escaped.
 std::string quoted(std::string_view token);
@@ -105,7 +103,7 @@ class Lexer {
     if (ec != std::errc() || end != digits.data() + digits.size() || digits.empty())
       fail(what + ": expected a number, got " + quoted(t));
     if (!std::isfinite(value)) fail(what + ": must be a finite number, got " + quoted(t));
-    if (std::abs(value) > kMaxCoordinate) fail(what + ": |" + quoted(t) + "| exceeds " + fmt(kMaxCoordinate));
+    if (std::abs(value) > kMaxCoordinate) fail(what + ": |" + quoted(t) + "| exceeds " + format_number(kMaxCoordinate));
     return value;
   }
 

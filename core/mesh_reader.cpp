@@ -8,7 +8,6 @@
 
 #include <fstream>
 #include <iterator>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -20,13 +19,6 @@ namespace palpate {
 namespace fs = std::filesystem;
 
 namespace mesh_io {
-
-std::string fmt(double x) {
-  std::ostringstream s;
-  s.precision(6);
-  s << x;
-  return s.str();
-}
 
 // The text of a token for a message: at most 40 bytes, control bytes escaped.
 std::string quoted(std::string_view token) {

@@ -33,8 +33,8 @@ void check_graded_grid(const Reader& r, const Scene& s) {
   constexpr char kAxis[] = "xyz";
   for (int a = 0; a < 3; ++a)
     if (!(focus[a] >= s.box.min[a] && focus[a] <= s.box.max[a]))
-      r["focus"].fail(std::string("the focus must lie in the box (") + kAxis[a] + " = " + fmt(focus[a]) +
-                      " is outside [" + fmt(s.box.min[a]) + ", " + fmt(s.box.max[a]) + "])");
+      r["focus"].fail(std::string("the focus must lie in the box (") + kAxis[a] + " = " + format_number(focus[a]) +
+                      " is outside [" + format_number(s.box.min[a]) + ", " + format_number(s.box.max[a]) + "])");
   const Eigen::Vector3i per_axis = s.distribution.spacing > 0 ? nodes_per_axis(s.box, s.distribution.spacing)
                                                               : Eigen::Vector3i::Constant(s.distribution.per_edge);
   for (int a = 0; a < 3; ++a) {

@@ -8,21 +8,6 @@
 
 namespace palpate::scene_io {
 
-// Shortest text that reads back as x, with a compact exponent: 0.7, 1000, 1e12, 1e-6.
-std::string fmt(double x) {
-  char buf[64];
-  const auto res = std::to_chars(buf, buf + sizeof buf, x);
-  std::string s(buf, res.ptr);
-  if (const auto e = s.find('e'); e != std::string::npos) {
-    std::size_t digits = e + 1;
-    const bool negative = s[digits] == '-';
-    if (s[digits] == '+' || s[digits] == '-') ++digits;
-    while (digits + 1 < s.size() && s[digits] == '0') ++digits;
-    s = s.substr(0, e + 1) + (negative ? "-" : "") + s.substr(digits);
-  }
-  return s;
-}
-
 // "string \"NaN\"", "number 3.5", "array of 2 elements", "object", "null".
 std::string describe(const json& v) {
   std::string s = v.type_name();

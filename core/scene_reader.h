@@ -16,6 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/number_format.h"
 #include "core/scene.h"
 
 namespace palpate::scene_io {
@@ -60,9 +61,6 @@ const char* name_for(const Named<T> (&names)[N], T value) {
 // ---------------------------------------------------------------------------
 // Formatting for messages.
 
-// Shortest text that reads back as x, with a compact exponent: 0.7, 1000, 1e12, 1e-6.
-std::string fmt(double x);
-
 // "string \"NaN\"", "number 3.5", "array of 2 elements", "object", "null".
 std::string describe(const json& v);
 
@@ -83,8 +81,8 @@ struct Range {
     return (lo_open ? x > lo : x >= lo) && (hi_open ? x < hi : x <= hi);
   }
   std::string text() const {
-    if (hi == kInf) return (lo_open ? "> " : ">= ") + fmt(lo);
-    return std::string("in ") + (lo_open ? "(" : "[") + fmt(lo) + ", " + fmt(hi) + (hi_open ? ")" : "]");
+    if (hi == kInf) return (lo_open ? "> " : ">= ") + format_number(lo);
+    return std::string("in ") + (lo_open ? "(" : "[") + format_number(lo) + ", " + format_number(hi) + (hi_open ? ")" : "]");
   }
 };
 constexpr Range closed(double lo, double hi) { return {lo, hi, false, false}; }
@@ -164,14 +162,14 @@ class Reader {
   double number() const {
     if (!value_->is_number()) fail("expected a number, got " + describe(*value_));
     const double x = value_->get<double>();
-    if (!std::isfinite(x)) fail("must be a finite number, got " + fmt(x));
+    if (!std::isfinite(x)) fail("must be a finite number, got " + format_number(x));
     return x;
   }
 
   void get(double& out, Range range) const {
     if (!present()) return;
     const double x = number();
-    if (!range.contains(x)) fail("must be a number " + range.text() + ", got " + fmt(x));
+    if (!range.contains(x)) fail("must be a number " + range.text() + ", got " + format_number(x));
     out = x;
   }
 
@@ -179,7 +177,7 @@ class Reader {
     if (!present()) return;
     const double x = number();
     if (x != std::floor(x) || x < lo || x > hi)
-      fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + fmt(x));
+      fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + format_number(x));
     out = static_cast<int>(x);
   }
 
@@ -191,7 +189,7 @@ class Reader {
     }
     const double x = number();
     if (x != std::floor(x) || x < 0.0 || x >= 18446744073709551616.0)  // 2^64
-      fail("must be a non-negative integer, got " + fmt(x));
+      fail("must be a non-negative integer, got " + format_number(x));
     out = static_cast<uint64_t>(x);
   }
 

@@ -25,10 +25,10 @@ void read_box(const Reader& r, BoxSpec& box) {
   for (int a = 0; a < 3; ++a) {
     const double edge = box.max[a] - box.min[a];
     if (!(edge > 0.0))
-      r.fail(std::string("max must exceed min in every component (") + kAxis[a] + ": max " + fmt(box.max[a]) +
-             " <= min " + fmt(box.min[a]) + ")");
+      r.fail(std::string("max must exceed min in every component (") + kAxis[a] + ": max " + format_number(box.max[a]) +
+             " <= min " + format_number(box.min[a]) + ")");
     if (edge > 1000.0)
-      r.fail(std::string("every edge must be at most 1000 m (") + kAxis[a] + ": " + fmt(edge) + " m)");
+      r.fail(std::string("every edge must be at most 1000 m (") + kAxis[a] + ": " + format_number(edge) + " m)");
   }
 }
 
@@ -75,7 +75,7 @@ void read_distribution(const Reader& r, const BoxSpec& box, const fs::path& base
       const double edge = box.max[a] - box.min[a];
       const double nodes = std::round(edge / d.spacing) + 1.0;
       if (nodes < 2.0 || nodes > 200.0)
-        r["spacing"].fail("gives " + (nodes > 1e6 ? std::string("over a million") : fmt(nodes)) + " nodes along " + kAxis[a] + " (edge " + fmt(edge) +
+        r["spacing"].fail("gives " + (nodes > 1e6 ? std::string("over a million") : format_number(nodes)) + " nodes along " + kAxis[a] + " (edge " + format_number(edge) +
                           " m); round(edge / spacing) + 1 must be in [2, 200]");
     }
   }
@@ -181,7 +181,7 @@ void read_box_corners(const Reader& r, Vec3& min, Vec3& max, bool solid) {
   for (int a = 0; a < 3; ++a)
     if (solid ? !(max[a] > min[a]) : !(max[a] >= min[a]))
       r["max"].fail(std::string(solid ? "must exceed min in every component (" : "must be at least min in every component (") +
-                    kAxis[a] + ": " + fmt(max[a]) + (solid ? " <= " : " < ") + fmt(min[a]) + ")");
+                    kAxis[a] + ": " + format_number(max[a]) + (solid ? " <= " : " < ") + format_number(min[a]) + ")");
 }
 
 // material.inclusions: [{"sphere": {...} | "box": {...}, "young_modulus", "poisson_ratio", "density"?}, ...],
@@ -297,7 +297,7 @@ void read_indenter(const Reader& r, IndenterSpec& ind) {
   for (int a = 0; a < 3; ++a)  // (both given: the box must not be empty; the build checks a derived corner)
     if (!(ind.workspace_max[a] > ind.workspace_min[a]))
       r["workspace_max"].fail(std::string("must exceed workspace_min in every component (") + kAxis[a] + ": " +
-                              fmt(ind.workspace_max[a]) + " <= " + fmt(ind.workspace_min[a]) + ")");
+                              format_number(ind.workspace_max[a]) + " <= " + format_number(ind.workspace_min[a]) + ")");
   r["guide"].get(ind.guide, "tool guide", kToolGuides);
 }
 
@@ -329,7 +329,7 @@ void read_health(const Reader& r, HealthSpec& h) {
 
 void read_gravity(const Reader& r, Vec3& g) {
   r.get(g);
-  if (g.norm() > 1e3) r.fail("norm must be at most 1000 m/s^2, got " + fmt(g.norm()));
+  if (g.norm() > 1e3) r.fail("norm must be at most 1000 m/s^2, got " + format_number(g.norm()));
 }
 
 void read_verify(const Reader& r, VerifySpec& v) {
