@@ -176,7 +176,7 @@ namespace {
 // graded lattice of per_edge nodes whose first spacing is `first_spacing`, for a static solve.
 Scene level_scene(const Scene& scene, int per_edge, HexFormulation formulation, double first_spacing) {
   Scene s = scene;
-  s.model = "hex_fem";
+  s.model = SolidKind::hex_fem;
   s.hex_fem.formulation = formulation;
   s.distribution.type = DistributionType::graded_grid;
   s.distribution.per_edge = per_edge;

@@ -36,25 +36,25 @@ namespace {
 void read_scene(const Reader& r, const fs::path& base_dir, Scene& s) {
   r.object(kSceneKeys);
   r["name"].get(s.name);
-  if (const auto* m = r["model"].pick("model", kModels)) s.model = *m;
+  r["model"].get(s.model, "model", kModels);
   read_body(r["body"], base_dir, s);
-  if (s.model == "hex_fem" && s.distribution.type == DistributionType::mesh)
+  if (s.model == SolidKind::hex_fem && s.distribution.type == DistributionType::mesh)
     r["body"]["distribution"]["type"].fail(
         "the hex_fem model meshes a lattice with bricks and cannot use a tetrahedral 'mesh' cloud: use a 'grid' or "
         "'graded_grid' distribution, or the 'mls' model");
   read_mls(r["mls"], s.distribution.type, s.mls);
   read_hex_fem(r["hex_fem"], s.hex_fem);
-  if (s.model == "hex_fem" && s.distribution.type != DistributionType::grid &&
+  if (s.model == SolidKind::hex_fem && s.distribution.type != DistributionType::grid &&
       s.distribution.type != DistributionType::graded_grid)
     r["body"]["distribution"]["type"].fail("the hex_fem model meshes a lattice: use a 'grid' or 'graded_grid' distribution");
   read_material(r["material"], s.material);
-  if (s.model == "hex_fem")
+  if (s.model == SolidKind::hex_fem)
     for (size_t k = 0; k < s.material.inclusions.size(); ++k)
       if (s.material.inclusions[k].shape == InclusionShape::group)
         r["material"]["inclusions"].elements("an array of inclusions")[k]["group"].fail(
             "a group names a physical volume of a tetrahedral mesh; the hex_fem model meshes a lattice (use a "
             "sphere or a box)");
-  if (s.model == "hex_fem" && s.material.law != MaterialLaw::stvk)
+  if (s.model == SolidKind::hex_fem && s.material.law != MaterialLaw::stvk)
     r["material"]["law"].fail("applies to the mls model; the hex_fem model's law is hex_fem.formulation");
   read_fixed(r["fixed"], s.fixed_faces, s.fixed_regions);
   read_indenter(r["indenter"], s.indenter);

@@ -30,6 +30,7 @@ std::vector<std::string> scene_field_paths() {
   return paths;
 }
 
+const char* to_string(SolidKind s) { return name_for(kModels, s); }
 const char* to_string(IntegratorType t) { return name_for(kIntegrators, t); }
 const char* to_string(ToolGuide g) { return name_for(kToolGuides, g); }
 const char* to_string(MaterialLaw l) { return name_for(kMaterialLaws, l); }

@@ -13,7 +13,10 @@
 
 namespace palpate::scene_io {
 
-inline constexpr std::string_view kModels[] = {"mls", "hex_fem"};
+inline constexpr Named<SolidKind> kModels[] = {
+    {"mls", SolidKind::mls},
+    {"hex_fem", SolidKind::hex_fem},
+};
 
 inline constexpr Named<HexFormulation> kHexFormulations[] = {
     {"linear", HexFormulation::linear},
