@@ -47,7 +47,7 @@ void check_site(const Scene& scene, const std::string& field) {
   const double R = scene.indenter.radius;
   const Vec3& lo = scene.box.min;
   const Vec3& hi = scene.box.max;
-  const std::string where = "(" + number_text(site[0]) + ", " + number_text(site[1]) + ") m";
+  const std::string where = std::string("(").append(number_text(site[0])) + ", " + number_text(site[1]) + ") m";
   if (!site.allFinite() || site[0] < lo[0] || site[0] > hi[0] || site[1] < lo[1] || site[1] > hi[1])
     throw std::invalid_argument(field + ": the site " + where + " is off the top face [" + number_text(lo[0]) + ", " +
                                 number_text(hi[0]) + "] x [" + number_text(lo[1]) + ", " + number_text(hi[1]) + "] m");
