@@ -7,9 +7,10 @@
 # indentation there. Then scripts/plot_slide.py draws the ratio and the depth error
 # against the speed (PNG).
 #
-# usage: scripts/slide_study.sh [--quick] [--out DIR]
+# usage: scripts/slide_study.sh [--quick] [--out DIR] [--raw RAW]
 #   --quick    the coarse 8^3 scene of tests/sliding_test.cpp only (seconds)
 #   --out DIR  output folder (default docs/verification/sliding)
+#   --raw RAW  the runs' JSON (default data/verification/sliding; with --out alone, DIR/raw)
 # BUILD_DIR (default build) holds bin/palpate-slide; it is built there (Release) if missing.
 # The full study (the haptic scene and the paper's 18^3 scene, 1 m/s ... 1 mm/s at 82.88 N)
 # takes about five minutes on one core.
@@ -18,27 +19,31 @@ cd "$(dirname "$0")/.."
 
 quick=0
 out=docs/verification/sliding
+raw=
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --quick) quick=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
+    --raw) raw=${2:?--raw needs a folder}; shift ;;
     -h|--help) sed -n '2,/^set /p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "slide_study.sh: unknown option '$1'" >&2; exit 2 ;;
   esac
   shift
 done
 
+# The runs' JSON (data/README.md): under data/ for an output under docs/, else DIR/raw.
+[[ -n $raw ]] || { [[ $out == docs/* ]] && raw=data/${out#docs/} || raw=$out/raw; }
 BUILD_DIR=${BUILD_DIR:-build}
 slide="$BUILD_DIR/bin/palpate-slide"
 BUILD_DIR=$BUILD_DIR scripts/build.sh palpate-slide >/dev/null  # Release, only if stale
-mkdir -p "$out"
+mkdir -p "$out" "$raw"
 force=82.88
 speeds=1,0.1,0.01,0.001
 
 run() {  # name, then palpate-slide arguments
   local name=$1; shift
   echo "slide_study.sh: $name" >&2
-  "$slide" "$@" --force "$force" --speeds "$speeds" --json --csv "$out/$name.csv" > "$out/$name.json"
+  "$slide" "$@" --force "$force" --speeds "$speeds" --json --csv "$out/$name.csv" > "$raw/$name.json"
 }
 
 if [[ $quick == 1 ]]; then
@@ -47,4 +52,4 @@ else
   run haptic --scene scenes/hertz_cube_haptic.json
   run uniform_18 --scene scenes/hertz_cube.json
 fi
-/usr/bin/python3 scripts/plot_slide.py "$out"
+/usr/bin/python3 scripts/plot_slide.py "$out" "$raw"
