@@ -47,7 +47,7 @@ void check_site(const Scene& scene, const std::string& field) {
   const double R = scene.indenter.radius;
   const Vec3& lo = scene.box.min;
   const Vec3& hi = scene.box.max;
-  const std::string where = "(" + number_text(site[0]) + ", " + number_text(site[1]) + ") m";
+  const std::string where = std::string("(").append(number_text(site[0])) + ", " + number_text(site[1]) + ") m";
   if (!site.allFinite() || site[0] < lo[0] || site[0] > hi[0] || site[1] < lo[1] || site[1] > hi[1])
     throw std::invalid_argument(field + ": the site " + where + " is off the top face [" + number_text(lo[0]) + ", " +
                                 number_text(hi[0]) + "] x [" + number_text(lo[1]) + ", " + number_text(hi[1]) + "] m");
@@ -176,7 +176,7 @@ namespace {
 // graded lattice of per_edge nodes whose first spacing is `first_spacing`, for a static solve.
 Scene level_scene(const Scene& scene, int per_edge, HexFormulation formulation, double first_spacing) {
   Scene s = scene;
-  s.model = "hex_fem";
+  s.model = SolidKind::hex_fem;
   s.hex_fem.formulation = formulation;
   s.distribution.type = DistributionType::graded_grid;
   s.distribution.per_edge = per_edge;

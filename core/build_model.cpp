@@ -434,15 +434,13 @@ Model build_model(const Scene& scene, const NodeCloud& cloud) {
   m.box_volume = scene.box_given ? (scene.box.max - scene.box.min).prod()
                                  : std::accumulate(cloud.mesh_volume.begin(), cloud.mesh_volume.end(), 0.0);
   set_material(m, scene.material);
-  if (scene.model == "mls")
-    build_mls(m, scene, cloud);
-  else if (scene.model == "hex_fem")
-    build_hex_fem(m, scene.hex_fem, scene.material, cloud, scene.source);
-  else
-    throw SceneError(scene.source, "/model", "unknown model '" + scene.model + "'");
+  switch (scene.model) {
+    case SolidKind::mls: build_mls(m, scene, cloud); break;
+    case SolidKind::hex_fem: build_hex_fem(m, scene.hex_fem, scene.material, cloud, scene.source); break;
+  }
   set_boundary_and_indenter(m, scene, cloud);
   spdlog::debug("model {}: {} particles, {} fixed, {} regularised (worst cond {:.3g}), volume {:.4g} of box {:.4g}",
-                scene.model, m.particle_count, m.fixed_count, m.regularized_count, m.worst_condition,
+                to_string(scene.model), m.particle_count, m.fixed_count, m.regularized_count, m.worst_condition,
                 m.total_volume, m.box_volume);
   if (scene.distribution.type == DistributionType::mesh)
     spdlog::debug("mesh {}: {} tetrahedra, {} unused nodes dropped", scene.distribution.mesh_file.string(),

@@ -12,10 +12,6 @@
 
 namespace palpate {
 
-enum class SolidKind { mls, hex_fem };
-// The scene's name of the model: "mls" or "hex_fem".
-inline const char* to_string(SolidKind s) { return s == SolidKind::mls ? "mls" : "hex_fem"; }
-
 struct Model {
   // What it was built from (the Scene itself stays the caller's: options_of(scene) gives
   // the step options, and nothing here may be edited to change them).

@@ -29,6 +29,9 @@ class SceneError : public std::runtime_error {
   std::string source_, field_, reason_;
 };
 
+// The elastic model of the body (scene "model"): the meshless solid, or the hexahedral FEM
+// reference (docs/physics.md §5).
+enum class SolidKind { mls, hex_fem };
 enum class DistributionType { grid, jittered_grid, graded_grid, node_file, mesh };
 // kernel sums, lattice cell volumes, or a quarter of each incident tetrahedron (mesh clouds)
 enum class VolumeRule { kernel, lattice, mesh };
@@ -231,7 +234,7 @@ struct VerifySpec {
 struct Scene {
   std::string name;
   std::string source;        // where the scene came from (file path), for messages
-  std::string model = "mls";  // "mls" (the meshless solid) or "hex_fem" (the FEM reference)
+  SolidKind model = SolidKind::mls;  // "mls" (the meshless solid) or "hex_fem" (the FEM reference)
   BoxSpec box;
   // false for a mesh body without /body/box: the mesh may have any shape, its bounding box
   // serves where a box is needed (Model::box_volume is then the mesh's volume). Lattices and
@@ -278,6 +281,7 @@ std::vector<double> default_verify_forces(const MaterialSpec& material, double r
 std::vector<std::string> scene_field_paths();
 
 // The scene-file names of enumerated values ("symplectic_euler").
+const char* to_string(SolidKind);
 const char* to_string(IntegratorType);
 const char* to_string(ToolGuide);
 const char* to_string(MaterialLaw);

@@ -8,18 +8,20 @@
 # scenes/palpation_block.json (the tissue without the lump) for contrast.
 # From each force-depth curve the force at a fixed depth D follows by interpolation
 # (log F against log d, monotone): F(x) at depth D, the signal a palpating finger feels.
-# Writes DIR/<scene>_<x>.json (palpate-verify --json), DIR/lateral_scan.csv (one row
+# Writes RAW/<scene>_<x>.json (palpate-verify --json), DIR/lateral_scan.csv (one row
 # per site and force), DIR/lateral_scan.md (the tables) and DIR/lateral_scan.png.
 #
 # With --follow the scenes are palpation_lump_follow and palpation_block_follow (their
 # clouds refined in-process at each site, docs/physics.md §7) against the same references.
 #
-# usage: scripts/lateral_scan_study.sh [--references] [--follow] [--depth D] [--out DIR]
+# usage: scripts/lateral_scan_study.sh [--references] [--follow] [--depth D] [--out DIR] [--raw RAW]
 #   --references  recompute the references at every site (about a minute each)
 #   --depth D     the fixed depth of the signal, m (default 0.0012)
 #   --sites LIST  x of the sites, m, comma-separated (default -0.02,-0.015,...,0.02)
 #   --follow      the refined-at-the-tool scenes (output default docs/verification/lateral_scan_follow)
 #   --out DIR     output folder (default docs/verification/lateral_scan)
+#   --raw RAW     the runs' JSON (default data/verification/lateral_scan, or _follow; with
+#                 --out alone, DIR/raw, so that a trial run leaves the stored data alone)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
 # built there (Release) when stale, through scripts/build.sh.
 # shellcheck source=SCRIPTDIR/lib/study_common.sh
@@ -29,6 +31,7 @@ references=0
 depth=0.0012
 sites_list="-0.02,-0.015,-0.01,-0.005,0,0.005,0.01,0.015,0.02"
 out=
+raw=
 suffix=
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -37,6 +40,7 @@ while [[ $# -gt 0 ]]; do
     --depth) depth=${2:?--depth needs a value in m}; shift ;;
     --sites) sites_list=${2:?--sites needs a list}; shift ;;
     --out) out=${2:?--out needs a folder}; shift ;;
+    --raw) raw=${2:?--raw needs a folder}; shift ;;
     -h|--help) study_help ;;
     *) study_unknown_option "$1" ;;
   esac
@@ -44,10 +48,12 @@ while [[ $# -gt 0 ]]; do
 done
 
 [[ -n $out ]] || out=docs/verification/lateral_scan$suffix
+# The runs' JSON (data/README.md): under data/ for an output under docs/, else DIR/raw.
+[[ -n $raw ]] || { [[ $out == docs/* ]] && raw=data/${out#docs/} || raw=$out/raw; }
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
 study_build palpate-verify palpate-reference
-mkdir -p "$out"
+mkdir -p "$out" "$raw"
 IFS=, read -r -a sites <<< "$sites_list"
 
 for x in "${sites[@]}"; do
@@ -65,9 +71,9 @@ for x in "${sites[@]}"; do
     fi
     echo "lateral_scan_study.sh: palpate-verify --scene scenes/$scene.json --site $x,0" >&2
     start=$SECONDS
-    "$verify" --scene "scenes/$scene.json" --site "$x,0" --reference "$file" --json --quiet > "$out/${scene}_$x.json" || true
+    "$verify" --scene "scenes/$scene.json" --site "$x,0" --reference "$file" --json --quiet > "$raw/${scene}_$x.json" || true
     echo "lateral_scan_study.sh: $scene at x = $x: $((SECONDS - start)) s" >&2
   done
 done
 
-"$python" scripts/plot_lateral_scan.py "$out" "$depth"
+"$python" scripts/plot_lateral_scan.py "$out" "$depth" "$raw"

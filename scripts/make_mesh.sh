@@ -44,7 +44,9 @@
 #                       spacing its smallest sweep force asks for (three spacings across the
 #                       Hertz contact radius), every inclusion gets a --refine with six
 #                       spacings across its radius, and the box and focus are the scene's
-#                       (options after --scene override them). Needs palpate-resolution:
+#                       (options after --scene override them); a mesh body without a box
+#                       (any shape) gives neither, unless it names a focus: the body is
+#                       then this command's (--box, --dome). Needs palpate-resolution:
 #                       $PALPATE_BIN (default build/bin) or on PATH. Prints what it chose.
 #
 # scenes/meshes/palpation_block.msh (the hand-scale block) is
@@ -106,12 +108,18 @@ while [ $# -gt 0 ]; do
              [ -x "$tool" ] || tool=$(command -v palpate-resolution) ||
                die "--scene needs palpate-resolution (build it, or set PALPATE_BIN to the folder holding it)"
              values=$("$tool" --scene "$scene" --shell) || die "--scene: palpate-resolution could not read '$scene'"
-             eval "$values"
-             h0=$focus_size
-             read -r -a box <<< "$box"
-             read -r -a focus <<< "$focus"
-             for ((k = 0; k < refine_count; ++k)) { v=refine_$k; refines+=("${!v}"); }
-             echo "make_mesh.sh: $scene asks for $h0 m under the tool at (${focus[*]}), ${refine_count} inclusion(s)" >&2
+             # Its KEY=VALUE lines as scene_KEY (box and focus are this script's arrays): no
+             # box line for a mesh body of any shape, no focus line unless it is known.
+             unset scene_box scene_focus
+             eval "$(sed 's/^/scene_/' <<< "$values")"
+             h0=$scene_focus_size
+             [ -z "${scene_box:-}" ] || read -r -a box <<< "$scene_box"
+             [ -z "${scene_focus:-}" ] || read -r -a focus <<< "$scene_focus"
+             for ((k = 0; k < scene_refine_count; ++k)) { v=scene_refine_$k; refines+=("${!v}"); }
+             echo "make_mesh.sh: $scene asks for $h0 m under the tool at (${focus[*]:-the default focus})," \
+                  "${scene_refine_count} inclusion(s)${scene_box:+, box (${box[*]})}" >&2
+             [ -n "${scene_box:-}" ] ||
+               echo "make_mesh.sh: $scene is a mesh body without a box: the body is this command's (--box, --dome)" >&2
              shift 2 ;;
     -h|--help) sed -n '2,50p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (--help)" ;;

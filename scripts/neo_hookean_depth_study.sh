@@ -11,15 +11,17 @@
 # against the linear finite-block reference with the neo-Hookean and corotational laws,
 # and at d/R = 0.015 ... 0.065 the three laws (linear, corotational, neo-Hookean) on the
 # same cloud.
-# Writes DIR/large_depth.json, DIR/small_depth_<law>.json, DIR/tiny_<law>.json
+# Writes RAW/large_depth.json, RAW/small_depth_<law>.json, RAW/tiny_<law>.json
 # (palpate-verify --json) and DIR/neo_hookean_depth.md (the tables).
 #
-# usage: scripts/neo_hookean_depth_study.sh [--reference] [--out DIR]
+# usage: scripts/neo_hookean_depth_study.sh [--reference] [--out DIR] [--raw RAW]
 #   --reference   recompute the large-strain reference (quarter levels 11,16,21,26 with a
 #                 12 mm core: about 10 min on one core; the stored one is used otherwise)
 # The verify runs take about 15 min more (the refined cloud at d = R: ~600 particles in
 # contact).
 #   --out DIR     output folder (default docs/verification/neo_hookean_depth)
+#   --raw RAW     the runs' JSON (default data/verification/neo_hookean_depth; with --out
+#                 alone, DIR/raw)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
 # built there (Release) when stale, through scripts/build.sh.
 # shellcheck source=SCRIPTDIR/lib/study_common.sh
@@ -27,20 +29,24 @@ source "$(dirname "$0")/lib/study_common.sh"
 
 recompute=0
 out=docs/verification/neo_hookean_depth
+raw=
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --reference) recompute=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
+    --raw) raw=${2:?--raw needs a folder}; shift ;;
     -h|--help) study_help ;;
     *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
+# The runs' JSON (data/README.md): under data/ for an output under docs/, else DIR/raw.
+[[ -n $raw ]] || { [[ $out == docs/* ]] && raw=data/${out#docs/} || raw=$out/raw; }
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
 study_build palpate-verify palpate-reference
-mkdir -p "$out"
+mkdir -p "$out" "$raw"
 scene=scenes/palpation_block_neo.json
 ref=scenes/references/palpation_block_large_strain.json
 
@@ -57,25 +63,25 @@ fi
 # at each from the reference's curve (d^(3/2) linear in F between its depths).
 forces=0.36,0.55,1.2,2.2,3.0
 echo "neo_hookean_depth_study.sh: large depth, forces $forces N" >&2
-"$verify" --scene "$scene" --forces "$forces" --reference "$ref" --json --quiet > "$out/large_depth.json" || true
+"$verify" --scene "$scene" --forces "$forces" --reference "$ref" --json --quiet > "$raw/large_depth.json" || true
 
 for law in neo_hookean corotational; do
   echo "neo_hookean_depth_study.sh: default sweep, $law" >&2
-  "$verify" --scene "$scene" --set material.law=$law --json --quiet > "$out/small_depth_$law.json" || true
+  "$verify" --scene "$scene" --set material.law=$law --json --quiet > "$raw/small_depth_$law.json" || true
 done
 for law in linear corotational neo_hookean; do
   echo "neo_hookean_depth_study.sh: small forces, $law" >&2
   "$verify" --scene "$scene" --set material.law=$law --forces 0.005,0.01,0.02,0.05 --reference none \
-    --json --quiet > "$out/tiny_$law.json" || true
+    --json --quiet > "$raw/tiny_$law.json" || true
 done
 
-"$python" - "$out" "$ref" <<'EOF'
+"$python" - "$out" "$ref" "$raw" <<'EOF'
 import json, sys
-out, ref_file = sys.argv[1], sys.argv[2]
+out, ref_file, raw = sys.argv[1], sys.argv[2], sys.argv[3]
 ref = json.load(open(ref_file))
 R = 0.01
 def load(name):
-    return json.load(open(f"{out}/{name}.json"))
+    return json.load(open(f"{raw}/{name}.json"))
 lines = ["# The neo-Hookean MLS at large depth (scripts/neo_hookean_depth_study.sh)", ""]
 lines += ["## Large depth, against the large-strain reference", "",
           "levels: " + ", ".join(f"{l['per_edge']}^3 ({l['nodes']} nodes, spacing {1000 * l['first_spacing']:.2f} mm, "

@@ -8,14 +8,16 @@
 #   haptic_at_site  the same recipe (scripts/make_mesh.sh --focus-size 0.03 --far-size 0.3
 #                   --growth 1.15) with the focus at the site (needs gmsh)
 #   graded          scenes/hertz_cube_graded.json, whose lattice is graded toward the site
-# Writes DIR/<cloud>_<site>.json (palpate-verify --json), DIR/off_centre.csv and
+# Writes RAW/<cloud>_<site>.json (palpate-verify --json), DIR/off_centre.csv and
 # DIR/off_centre.md (the table).
 #
-# usage: scripts/off_centre_study.sh [--references] [--quick] [--out DIR]
+# usage: scripts/off_centre_study.sh [--references] [--quick] [--out DIR] [--raw RAW]
 #   --references  recompute the references at the off-centre sites (about a minute each)
 #                 into scenes/references/
 #   --quick       three forces and the haptic clouds only (seconds)
 #   --out DIR     output folder (default docs/verification/off_centre)
+#   --raw RAW     the runs' JSON (default data/verification/off_centre; with --out alone,
+#                 DIR/raw)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference; they are
 # built there (Release) when stale, through scripts/build.sh.
 # shellcheck source=SCRIPTDIR/lib/study_common.sh
@@ -24,21 +26,25 @@ source "$(dirname "$0")/lib/study_common.sh"
 references=0
 quick=0
 out=docs/verification/off_centre
+raw=
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --references) references=1 ;;
     --quick) quick=1 ;;
     --out) out=${2:?--out needs a folder}; shift ;;
+    --raw) raw=${2:?--raw needs a folder}; shift ;;
     -h|--help) study_help ;;
     *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
+# The runs' JSON (data/README.md): under data/ for an output under docs/, else DIR/raw.
+[[ -n $raw ]] || { [[ $out == docs/* ]] && raw=data/${out#docs/} || raw=$out/raw; }
 verify="$BUILD_DIR/bin/palpate-verify"
 reference="$BUILD_DIR/bin/palpate-reference"
 study_build palpate-verify palpate-reference
-mkdir -p "$out"
+mkdir -p "$out" "$raw"
 sites=("0,0" "0.4,0.3" "0.5,0")
 forces=()
 [[ $quick == 1 ]] && forces=(--forces 29.3,82.88,191.9)
@@ -61,30 +67,30 @@ trap 'rm -rf "$meshes"' EXIT
 for site in "${sites[@]}"; do
   tag=${site/,/_}
   echo "off_centre_study.sh: site ($site)" >&2
-  "$verify" --scene scenes/hertz_cube_haptic.json --site "$site" "${forces[@]}" --json --quiet > "$out/haptic_$tag.json" || true
+  "$verify" --scene scenes/hertz_cube_haptic.json --site "$site" "${forces[@]}" --json --quiet > "$raw/haptic_$tag.json" || true
   if [[ $have_gmsh == 1 ]]; then
     mesh="$meshes/haptic_at_site_$tag.msh"
     scripts/make_mesh.sh --focus-size 0.03 --far-size 0.3 --growth 1.15 --focus "${site%,*}" "${site#*,}" 0 --out "$mesh" > /dev/null
     "$verify" --scene scenes/hertz_cube_haptic.json --set "body.distribution.file=$(realpath "$mesh")" --site "$site" "${forces[@]}" \
-      --json --quiet > "$out/haptic_at_site_$tag.json" || true
+      --json --quiet > "$raw/haptic_at_site_$tag.json" || true
   else
     echo "off_centre_study.sh: no gmsh: the haptic_at_site clouds are skipped" >&2
   fi
   if [[ $quick == 0 ]]; then
-    "$verify" --scene scenes/hertz_cube_graded.json --site "$site" --json --quiet > "$out/graded_$tag.json" || true
+    "$verify" --scene scenes/hertz_cube_graded.json --site "$site" --json --quiet > "$raw/graded_$tag.json" || true
   fi
 done
 
-"$python" - "$out" <<'PY'
+"$python" - "$out" "$raw" <<'PY'
 import glob, json, os, sys
-out = sys.argv[1]
+out, raw = sys.argv[1], sys.argv[2]
 rows, md = [], []
 order = {"haptic": 0, "haptic_at_site": 1, "graded": 2}
 site_order = {"0_0": 0, "0.4_0.3": 1, "0.5_0": 2}
 def sort_key(p):
     cloud, x, y = os.path.splitext(os.path.basename(p))[0].rsplit("_", 2)
     return (order.get(cloud, 9), site_order.get(x + "_" + y, 9), p)
-files = sorted(glob.glob(os.path.join(out, "*.json")), key=sort_key)
+files = sorted(glob.glob(os.path.join(raw, "*.json")), key=sort_key)
 for path in files:
     j = json.load(open(path))
     cloud = os.path.basename(path).rsplit("_", 2)[0]

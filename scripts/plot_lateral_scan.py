@@ -1,9 +1,10 @@
 #!/usr/bin/python3
 """The lateral scan's tables and plot (scripts/lateral_scan_study.sh).
 
-usage: plot_lateral_scan.py DIR DEPTH
+usage: plot_lateral_scan.py DIR DEPTH [RAW]
 
-Reads DIR/<scene>_<x>.json (palpate-verify --json at the site (x, 0)) and writes
+Reads RAW/<scene>_<x>.json (palpate-verify --json at the site (x, 0); RAW defaults to
+data/verification/X for DIR docs/verification/X, else DIR/raw) and writes
 DIR/lateral_scan.csv, DIR/lateral_scan.md and DIR/lateral_scan.png: the force at the
 fixed depth DEPTH (m) across the sites, simulated and reference, with and without the lump.
 The force at a depth is interpolated on log F against log d between the two rows of
@@ -22,6 +23,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
+def raw_default(out):
+    """The runs' JSON for the output folder OUT: under data/ for a folder under docs/
+    (docs/verification/X -> data/verification/X, data/README.md), else OUT/raw."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    parts = os.path.relpath(os.path.abspath(out), root).split(os.sep)
+    if parts[0] == "docs" and len(parts) > 1:
+        return os.path.join(root, "data", *parts[1:])
+    return os.path.join(out, "raw")
+
+
 def force_at_depth(forces, depths, depth):
     pairs = sorted((d, f) for d, f in zip(depths, forces) if d is not None and d > 0 and math.isfinite(d))
     for (d0, f0), (d1, f1) in zip(pairs, pairs[1:]):
@@ -33,8 +44,9 @@ def force_at_depth(forces, depths, depth):
 
 def main():
     out, depth = sys.argv[1], float(sys.argv[2])
+    raw = sys.argv[3] if len(sys.argv) > 3 else raw_default(out)
     runs = {}
-    for path in glob.glob(os.path.join(out, "*.json")):
+    for path in glob.glob(os.path.join(raw, "*.json")):
         scene, x = os.path.splitext(os.path.basename(path))[0].rsplit("_", 1)
         try:
             runs[(scene, float(x))] = json.load(open(path))

@@ -1,9 +1,9 @@
 #!/usr/bin/python3
 """Figures and the Markdown table of the multirate study (scripts/multirate_study.sh).
 
-usage: /usr/bin/python3 scripts/plot_multirate.py DIR
-Reads every DIR/NAME.json and DIR/NAME.csv written by palpate-bench-multirate --json --csv
-and writes DIR/NAME.png (the pressing force over the path: the truth stepped at the haptic
+usage: /usr/bin/python3 scripts/plot_multirate.py DIR [RAW]
+Reads every RAW/NAME.json and DIR/NAME.csv written by palpate-bench-multirate --json --csv
+(RAW defaults to data/verification/X for DIR docs/verification/X, else DIR/raw) and writes DIR/NAME.png (the pressing force over the path: the truth stepped at the haptic
 rate, the multirate render and the zero-order hold; below, their errors against the
 truth) and DIR/multirate.md (the error table of every run).
 """
@@ -17,6 +17,16 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+
+def raw_default(out):
+    """The runs' JSON for the output folder OUT: under data/ for a folder under docs/
+    (docs/verification/X -> data/verification/X, data/README.md), else OUT/raw."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    parts = os.path.relpath(os.path.abspath(out), root).split(os.sep)
+    if parts[0] == "docs" and len(parts) > 1:
+        return os.path.join(root, "data", *parts[1:])
+    return os.path.join(out, "raw")
 
 
 def plot(name, data, table, folder):
@@ -76,20 +86,20 @@ def plot(name, data, table, folder):
                          f"{b['median']:.3g} / {b['p99']:.3g} |")
 
 
-def main(folder):
+def main(folder, raw):
     table = ["# Multirate haptics: force error along the palpation path (palpate-bench-multirate)"]
-    names = [os.path.splitext(os.path.basename(p))[0] for p in sorted(glob.glob(os.path.join(folder, "*.json")))]
+    names = [os.path.splitext(os.path.basename(p))[0] for p in sorted(glob.glob(os.path.join(raw, "*.json")))]
     names = [n for n in names if os.path.exists(os.path.join(folder, n + ".csv"))]
     if not names:
-        sys.exit(f"plot_multirate.py: no palpate-bench-multirate JSON and CSV in {folder}")
+        sys.exit(f"plot_multirate.py: no palpate-bench-multirate JSON in {raw} with its CSV in {folder}")
     for name in names:
-        with open(os.path.join(folder, name + ".json")) as f:
+        with open(os.path.join(raw, name + ".json")) as f:
             plot(name, json.load(f), table, folder)
     with open(os.path.join(folder, "multirate.md"), "w") as f:
         f.write("\n".join(table) + "\n")
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
+    if len(sys.argv) not in (2, 3):
         sys.exit(__doc__)
-    main(sys.argv[1])
+    main(sys.argv[1], sys.argv[2] if len(sys.argv) > 2 else raw_default(sys.argv[1]))

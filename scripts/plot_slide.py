@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """Figures and the Markdown table of the sliding study (scripts/slide_study.sh).
 
-usage: /usr/bin/python3 scripts/plot_slide.py DIR
-Reads every DIR/*.json written by palpate-slide --json and writes DIR/sliding.png
+usage: /usr/bin/python3 scripts/plot_slide.py DIR [RAW]
+Reads every RAW/*.json written by palpate-slide --json (RAW defaults to data/verification/X
+for DIR docs/verification/X, else DIR/raw) and writes DIR/sliding.png
 (|mean F_x| / |mean F_z| and the depth error at the middle against the speed) and
 DIR/sliding.md (the table).
 """
@@ -17,15 +18,25 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-def main(folder):
+def raw_default(out):
+    """The runs' JSON for the output folder OUT: under data/ for a folder under docs/
+    (docs/verification/X -> data/verification/X, data/README.md), else OUT/raw."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    parts = os.path.relpath(os.path.abspath(out), root).split(os.sep)
+    if parts[0] == "docs" and len(parts) > 1:
+        return os.path.join(root, "data", *parts[1:])
+    return os.path.join(out, "raw")
+
+
+def main(folder, raw):
     runs = []
-    for path in sorted(glob.glob(os.path.join(folder, "*.json"))):
+    for path in sorted(glob.glob(os.path.join(raw, "*.json"))):
         with open(path) as f:
             data = json.load(f)
         if "rows" in data and "static_depth" in data:
             runs.append((os.path.splitext(os.path.basename(path))[0], data))
     if not runs:
-        sys.exit(f"plot_slide.py: no palpate-slide JSON in {folder}")
+        sys.exit(f"plot_slide.py: no palpate-slide JSON in {raw}")
 
     fig, (ax_ratio, ax_depth) = plt.subplots(1, 2, figsize=(11, 4.2))
     lines = ["| scene | particles | v [m/s] | mean F_x [N] | mean F_z [N] | \\|F_x\\|/\\|F_z\\| | rms F_x/F_z "
@@ -77,6 +88,6 @@ def main(folder):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
+    if len(sys.argv) not in (2, 3):
         sys.exit(__doc__)
-    main(sys.argv[1])
+    main(sys.argv[1], sys.argv[2] if len(sys.argv) > 2 else raw_default(sys.argv[1]))

@@ -24,10 +24,11 @@
 #
 # References are looked up by key (palpate-reference's, which names the site) in the scene
 # folder's references/ (the stored ones, e.g. scenes/references/palpation_block.json at the
-# centre) and in the cache (DIR/references/), and only the missing ones are computed, into the
-# cache. The cache is in the docs tree, not the build tree: a reference costs 50-100 s of one
-# core and is a small JSON file, so keeping it next to the map it produced makes the map
-# reproducible from the repository alone and a re-run cheap (~1 min: the presses only).
+# centre) and in the cache (RAW/references/), and only the missing ones are computed, into the
+# cache. The cache is in the repository's data/, not the build tree: a reference costs 50-100 s
+# of one core and is a small JSON file, so keeping it beside the presses of the map it produced
+# makes the map reproducible from the repository alone and a re-run cheap (~1 min: the presses
+# only).
 #
 # Time: 50-100 s per new reference (one core each, --jobs at a time), ~2 s per pressed site.
 # palpation_block from scratch on a 2-core machine (nice -n 10): 3 min 54 s (the 5 references
@@ -35,8 +36,8 @@
 # (24 references besides a stored centre) expect ~15-20 min on 2 jobs.
 #
 # Writes (NAME = the scene's file name without .json):
-#   DIR/sites/NAME_X_Y.json            palpate-verify --json at each site
-#   DIR/references/NAME_site_X_Y.json  the computed references (the cache)
+#   RAW/sites/NAME_X_Y.json            palpate-verify --json at each site
+#   RAW/references/NAME_site_X_Y.json  the computed references (the cache)
 #   DIR/NAME.csv                       one row per site: x, y, the error at each force, the worst
 #                                      |error|, the L2 error, the reference used
 #   DIR/NAME_rows.csv                  one row per site and force (d_sim, d_ref, its uncertainty)
@@ -53,9 +54,11 @@
 #   --no-symmetric    compute the reference at every site
 #   --jobs N          references (and presses) run N at a time (default 2)
 #   --out DIR         output folder (default docs/verification/surface_map)
+#   --raw RAW         the presses' JSON and the references' cache (default
+#                     data/verification/surface_map; with --out alone, DIR/raw)
 #   --per-axis N      sites per axis of the grid (default 5)
 #   --sites LIST      explicit sites instead of the grid, 'X,Y X,Y ...' (m)
-#   --cache DIR       the references' cache (default DIR/references of --out)
+#   --cache DIR       the references' cache (default RAW/references)
 #   --references      recompute the references into the cache even when one is found
 # Paths are relative to the repository root.
 # shellcheck source=SCRIPTDIR/lib/study_common.sh
@@ -66,6 +69,7 @@ scene=scenes/palpation_block.json
 symmetric=
 jobs=2
 out=docs/verification/surface_map
+raw=
 per_axis=5
 sites_list=
 references=0
@@ -78,6 +82,7 @@ while [[ $# -gt 0 ]]; do
     --no-symmetric) symmetric=0 ;;
     --jobs) jobs=${2:?--jobs needs a number}; shift ;;
     --out) out=${2:?--out needs a folder}; shift ;;
+    --raw) raw=${2:?--raw needs a folder}; shift ;;
     --per-axis) per_axis=${2:?--per-axis needs a number}; shift ;;
     --sites) sites_list=${2:?--sites needs a list}; shift ;;
     --cache) cache=${2:?--cache needs a folder}; shift ;;
@@ -95,9 +100,11 @@ reference="$build/bin/palpate-reference"
 study_require "$verify" "$reference"  # this script compiles nothing
 name=$(basename "$scene" .json)
 [[ -z $symmetric ]] && { [[ $name == palpation_block ]] && symmetric=1 || symmetric=0; }
-cache=${cache:-$out/references}
+# The runs' JSON (data/README.md): under data/ for an output under docs/, else DIR/raw.
+[[ -n $raw ]] || { [[ $out == docs/* ]] && raw=data/${out#docs/} || raw=$out/raw; }
+cache=${cache:-$raw/references}
 stored="$(dirname "$scene")/references"
-mkdir -p "$out/sites" "$cache"
+mkdir -p "$out" "$raw/sites" "$cache"
 tmp=$(mktemp -d)
 trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$tmp"' EXIT
 
@@ -227,7 +234,7 @@ PY
 
 press() {
   local x=$1 y=$2 ref=$3 rc=0
-  local json="$out/sites/${name}_${x}_${y}.json"
+  local json="$raw/sites/${name}_${x}_${y}.json"
   "$verify" --scene "$scene" --site "$x,$y" --reference "$ref" --json --quiet > "$json.part" 2> "$tmp/verify_${x}_${y}.log" || rc=$?
   if [[ $rc == 0 || $rc == 3 ]]; then  # 3: some force did not come to rest (its row says so)
     mv "$json.part" "$json"
@@ -242,7 +249,7 @@ start_all=$SECONDS
 while read -r x y ox oy; do
   ref=$(site_reference "$x" "$y" "$ox" "$oy")
   printf '%s %s %s %s %s\n' "$x" "$y" "$ox" "$oy" "${octant_file[$ox,$oy]}" >> "$tmp/pressed.txt"
-  rm -f "$out/sites/${name}_${x}_${y}.json"
+  rm -f "$raw/sites/${name}_${x}_${y}.json"
   throttle
   echo "surface_map_study.sh: palpate-verify --scene $scene --site $x,$y" >&2
   press "$x" "$y" "$ref" &
@@ -251,14 +258,14 @@ wait
 echo "surface_map_study.sh: $(wc -l < "$tmp/pressed.txt") sites pressed in $((SECONDS - start_all)) s" >&2
 
 # The tables.
-"$python" - "$out" "$name" "$tmp/pressed.txt" <<'PY'
+"$python" - "$out" "$name" "$tmp/pressed.txt" "$raw" <<'PY'
 import json, math, os, sys
-out, name, pressed = sys.argv[1:4]
+out, name, pressed, raw = sys.argv[1:5]
 sites = [line.split() for line in open(pressed)]
 rows, long_rows, forces = [], [], None
 missing = []
 for x, y, ox, oy, ref_file in sites:
-    path = os.path.join(out, "sites", "%s_%s_%s.json" % (name, x, y))
+    path = os.path.join(raw, "sites", "%s_%s_%s.json" % (name, x, y))
     if not os.path.exists(path):
         missing.append((x, y))
         continue

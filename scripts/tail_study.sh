@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
 # The real-time tail over many runs (issue #17 item 5): palpate-bench-server, --runs times
 # for --seconds each, on the 18^3 default (hertz_cube, RK4, 1 kHz) and on the haptic scene
-# (hertz_cube_haptic, 1 kHz), alternating; one JSON per run in --out, then a table of
+# (hertz_cube_haptic, 1 kHz), alternating; one JSON per run in --raw, then a table of
 # every run's deadline misses (by cause), tick lateness p99, step p99 and the host's
 # steal, and the median of each. A single run says little on a shared machine: its tail
 # swings by ten times from run to run.
 #
-# usage: scripts/tail_study.sh [--runs N] [--seconds S] [--out DIR]
+# usage: scripts/tail_study.sh [--runs N] [--seconds S] [--out DIR] [--raw RAW]
 #   --runs N     runs per scene (default 10)
 #   --seconds S  length of each run (default 60)
 #   --out DIR    output folder (default docs/verification/tail)
+#   --raw RAW    the runs' JSON (default data/verification/tail; with --out alone, DIR/raw)
 # LOCK (optional): a file each run holds with flock(1) while it measures, so that builds
 # that take the same lock wait (the project's helpers build through /tmp/palpate-build.lock).
 # BUILD_DIR (default build) holds the programs; they are built there (Release) if missing.
@@ -19,20 +20,24 @@ source "$(dirname "$0")/lib/study_common.sh"
 runs=10
 seconds=60
 out=docs/verification/tail
+raw=
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --runs) runs=${2:?--runs needs a number}; shift ;;
     --seconds) seconds=${2:?--seconds needs a number}; shift ;;
     --out) out=${2:?--out needs a folder}; shift ;;
+    --raw) raw=${2:?--raw needs a folder}; shift ;;
     -h|--help) study_help ;;
     *) study_unknown_option "$1" ;;
   esac
   shift
 done
 
+# The runs' JSON (data/README.md): under data/ for an output under docs/, else DIR/raw.
+[[ -n $raw ]] || { [[ $out == docs/* ]] && raw=data/${out#docs/} || raw=$out/raw; }
 build=$BUILD_DIR
 study_build palpate-server palpate-bench-server
-mkdir -p "$out"
+mkdir -p "$out" "$raw"
 measure() {  # output file, then the benchmark's arguments
   local file=$1
   shift
@@ -45,17 +50,17 @@ measure() {  # output file, then the benchmark's arguments
 for ((k = 1; k <= runs; ++k)); do
   for scene in hertz_cube hertz_cube_haptic; do
     echo "== $scene run $k of $runs ($seconds s)" >&2
-    measure "$out/${scene}_$k.json" --scene "scenes/$scene.json" --seconds "$seconds"
+    measure "$raw/${scene}_$k.json" --scene "scenes/$scene.json" --seconds "$seconds"
   done
 done
-"$python" - "$out" <<'PY'
+"$python" - "$out" "$raw" <<'PY'
 import glob, json, os, re, statistics, sys
-folder = sys.argv[1]
+folder, raw = sys.argv[1], sys.argv[2]
 lines = ["| scene | run | ticks | misses (%) | late starts / long steps | skipped | lateness p99 (us) | step p50 / p99 (us) | steal (s) |",
          "|---|---:|---:|---:|---|---:|---:|---|---:|"]
 for scene in ("hertz_cube", "hertz_cube_haptic"):
     rows = []
-    for path in glob.glob(os.path.join(folder, "*.json")):
+    for path in glob.glob(os.path.join(raw, "*.json")):
         m = re.fullmatch(re.escape(scene) + r"_(\d+)\.json", os.path.basename(path))
         if not m:
             continue

@@ -299,7 +299,7 @@ TEST_F(MeshFiles, NotANumberCoordinate) {
   const std::string text = replace(kGmsh22, "7 0 1 1", "7 0 nan 1");
   EXPECT_EQ(error_of("m.msh", text), at("m.msh", text, "nan") + "y: must be a finite number, got 'nan'");
   const std::string huge = replace(kGmsh22, "7 0 1 1", "7 0 1e300 1");
-  EXPECT_TRUE(contains(error_of("m.msh", huge), "exceeds 1e+12")) << error_of("m.msh", huge);
+  EXPECT_TRUE(contains(error_of("m.msh", huge), "exceeds 1e12")) << error_of("m.msh", huge);
   const std::string overflow = replace(kGmsh22, "7 0 1 1", "7 0 1e999 1");
   EXPECT_TRUE(contains(error_of("m.msh", overflow), "'1e999' is out of range"));
 }
@@ -375,7 +375,7 @@ TEST_F(MeshFiles, DegenerateTetrahedra) {
   const std::string node = "5 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 2 2 0\n";
   const std::string ele = "2 4 0\n1 1 2 3 4\n2 1 2 3 5\n";
   EXPECT_EQ(error_of("flat.node", node, ele),
-            (dir_ / "flat.ele").string() + ":3: tetrahedron 2 is degenerate: volume 0 m^3 with longest edge 2.82843 m "
+            (dir_ / "flat.ele").string() + ":3: tetrahedron 2 is degenerate: volume 0 m^3 with longest edge 2.8284271247461903 m "
                                            "(|V| must exceed 1e-12 L^3): its four nodes are (nearly) in one plane");
 }
 
@@ -407,7 +407,7 @@ TEST_F(MeshFiles, InvertedTetrahedron) {
   const std::string text = replace(kGmsh41, "9 1 7 5 8", "9 1 5 7 8");
   EXPECT_EQ(error_of("m.msh", text),
             at("m.msh", text, "9 1 5 7 8") +
-                "tetrahedron 9 is inverted: signed volume -0.166667 m^3 (nodes 1 5 7 8: seen from the fourth, the first "
+                "tetrahedron 9 is inverted: signed volume -0.16666666666666666 m^3 (nodes 1 5 7 8: seen from the fourth, the first "
                 "three turn clockwise) while 5 of the file's 6 tetrahedra are positive: the mesh is tangled or this "
                 "element's nodes are misnumbered (regenerate the mesh, or swap two of its nodes)");
   // The first tetrahedron inverted: the file's orientation is its majority's, so the
@@ -428,7 +428,7 @@ TEST_F(MeshFiles, InvertedInANegativelyOrientedFile) {
   const std::string one_positive = replace(mirrored, "2 1 2 6 8", "2 1 6 2 8");
   EXPECT_EQ(error_of("c.node", tetgen_node(1), one_positive),
             at("c.ele", one_positive, "2 1 6 2 8") +
-                "tetrahedron 2 is inverted: signed volume 0.166667 m^3 (nodes 1 6 2 8: seen from the fourth, the first "
+                "tetrahedron 2 is inverted: signed volume 0.16666666666666666 m^3 (nodes 1 6 2 8: seen from the fourth, the first "
                 "three turn counterclockwise) while 5 of the file's 6 tetrahedra are negative: the mesh is tangled or "
                 "this element's nodes are misnumbered (regenerate the mesh, or swap two of its nodes)");
 }

@@ -239,7 +239,7 @@ namespace {
 // A site nothing was prepared for: drawn (seeded) from the 25 sites of the surface map, the
 // follow scene's cloud refined there by the scene itself, pressed to rest on the vertical
 // guide at the smallest and the largest verification force, against that site's converged
-// finite-block reference (the hex FEM, docs/verification/surface_map/references; a site off
+// finite-block reference (the hex FEM, data/verification/surface_map/references; a site off
 // the octant takes its mirror's, the block being symmetric under x -> -x, y -> -y, x <-> y).
 // The map measured 0.9 ... 3.2 % worst over the 25 sites.
 TEST(MeshRefinement, AnUnanticipatedSiteIsOnItsReference) {
@@ -255,7 +255,7 @@ TEST(MeshRefinement, AnUnanticipatedSiteIsOnItsReference) {
   };
   const fs::path reference_file =
       a == 0.0 ? fs::path(PALPATE_SOURCE_DIR) / "scenes" / "references" / "palpation_block.json"
-               : fs::path(PALPATE_SOURCE_DIR) / "docs" / "verification" / "surface_map" / "references" /
+               : fs::path(PALPATE_SOURCE_DIR) / "data" / "verification" / "surface_map" / "references" /
                      ("palpation_block_site_" + text(a) + "_" + text(b) + ".json");
   const Reference reference = load_reference(reference_file);
   Scene scene = load_scene(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_block_follow.json");

@@ -1,5 +1,5 @@
 // The scene schema is written in four places: the structs and their defaults
-// (core/scene.h), the reader's keys and ranges (core/scene.cpp), the wire Scene's
+// (core/scene.h), the reader's keys and ranges (core/scene_schema.h, core/scene_sections.cpp), the wire Scene's
 // defaults and range comments (protocol/palpate.capnp) and the field tables of
 // docs/scene-format.md. These tests read all four field by field and fail naming
 // the field wherever one place disagrees with the others.
@@ -188,7 +188,7 @@ const Field kFields[] = {
 #undef SCENE_FIELD
 
 // A member added to (or removed from) a scene struct stops these bindings compiling.
-// Add it to kFields above, read it in core/scene.cpp, carry it in protocol/palpate.capnp
+// Add it to kFields above, read it in core/scene_sections.cpp (its key in core/scene_schema.h), carry it in protocol/palpate.capnp
 // and document it in docs/scene-format.md; the tests below check that all four agree.
 [[maybe_unused]] void every_member_is_in_kFields(const Scene& s) {
   [[maybe_unused]] const auto& [name, source, model, box, box_given, distribution, mls, hex_fem, material, fixed_faces,
@@ -593,8 +593,8 @@ TEST(SceneSchema, TheFieldListIsTheReaders) {
   std::vector<std::string> listed;
   for (const Field& f : kFields)
     if (!f.pointer.empty()) listed.emplace_back(f.pointer);
-  const std::string d = list_differences(listed, "kFields (this test)", scene_field_paths(), "core/scene.cpp");
-  EXPECT_TRUE(d.empty()) << "kFields and the keys core/scene.cpp reads differ:" << d;
+  const std::string d = list_differences(listed, "kFields (this test)", scene_field_paths(), "core/scene_schema.h");
+  EXPECT_TRUE(d.empty()) << "kFields and the keys core/scene_schema.h lists differ:" << d;
 }
 
 TEST(SceneSchema, EmptyFileLeavesEveryStructDefault) {
@@ -754,8 +754,8 @@ TEST(SceneSchema, InclusionMaterialCrossesTheWire) {
 TEST(SceneSchema, DocumentedFieldsAreTheReadersFields) {
   std::vector<std::string> documented;
   for (const DocField& f : doc_fields()) documented.push_back(f.pointer);
-  const std::string d = list_differences(documented, kDocs, scene_field_paths(), "core/scene.cpp");
-  EXPECT_TRUE(d.empty()) << kDocs << "'s field tables (in document order) and core/scene.cpp's keys (in reading order) differ:"
+  const std::string d = list_differences(documented, kDocs, scene_field_paths(), "core/scene_schema.h");
+  EXPECT_TRUE(d.empty()) << kDocs << "'s field tables (in document order) and core/scene_schema.h's keys (in reading order) differ:"
                          << d;
 }
 

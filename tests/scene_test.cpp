@@ -63,7 +63,7 @@ TEST(Scene, EmptyObjectGivesAllDefaults) {
   const Scene d;
   EXPECT_EQ(s.name, "my_scene");  // the source's stem
   EXPECT_EQ(s.source, "some/dir/my_scene.json");
-  EXPECT_EQ(s.model, "mls");
+  EXPECT_EQ(s.model, SolidKind::mls);
   EXPECT_EQ(s.box.min, d.box.min);
   EXPECT_EQ(s.box.max, d.box.max);
   EXPECT_EQ(s.distribution.type, DistributionType::grid);
@@ -134,7 +134,7 @@ TEST(Scene, ShippedHertzCube) {
   const Scene s = load_scene(file);
   EXPECT_EQ(s.name, "hertz_cube");
   EXPECT_EQ(s.source, file.string());
-  EXPECT_EQ(s.model, "mls");
+  EXPECT_EQ(s.model, SolidKind::mls);
   EXPECT_EQ(s.box.min, Vec3(-1, -1, -2));
   EXPECT_EQ(s.box.max, Vec3(1, 1, 0));
   EXPECT_EQ(s.distribution.type, DistributionType::grid);
@@ -681,14 +681,14 @@ namespace {
 
 TEST(SceneHexFem, ModelAndFormulationParse) {
   const Scene s = parse_scene(R"({"model": "hex_fem", "hex_fem": {"formulation": "corotational"}})", "t.json", ".");
-  EXPECT_EQ(s.model, "hex_fem");
+  EXPECT_EQ(s.model, SolidKind::hex_fem);
   EXPECT_EQ(s.hex_fem.formulation, HexFormulation::corotational);
   EXPECT_EQ(s.hex_fem.volumetric_integration, HexVolumetricIntegration::full);
   EXPECT_EQ(parse_scene(R"({"model": "hex_fem", "hex_fem": {"volumetric_integration": "reduced"}})", "t.json", ".")
                 .hex_fem.volumetric_integration,
             HexVolumetricIntegration::reduced);
   const Scene shipped = load_scene(std::string(PALPATE_SOURCE_DIR) + "/scenes/hertz_cube_fem.json");
-  EXPECT_EQ(shipped.model, "hex_fem");
+  EXPECT_EQ(shipped.model, SolidKind::hex_fem);
   EXPECT_EQ(shipped.integrator.type, IntegratorType::implicit_euler);
 }
 

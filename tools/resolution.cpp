@@ -30,7 +30,10 @@ inclusions are then named as not sized.
   --json            one JSON object on stdout
   --shell           KEY=VALUE lines for a shell (scripts/make_mesh.sh --scene):
                     focus_size, focus (x y z), box (6 numbers), refine_count and
-                    refine_K (x y z radius spacing) per inclusion
+                    refine_K (x y z radius spacing) per inclusion. A mesh body without
+                    a box (any shape) has neither box nor focus line (and no JSON
+                    focus) unless the scene gives body.distribution.focus: its shape
+                    and its surface are the mesh's, not the default box's
 Exit status: 0 on success, 1 for a scene that cannot be read, 2 for a usage error.
 )";
 
@@ -84,6 +87,12 @@ int main(int argc, char** argv) {
     std::cerr << "palpate-resolution: " << e.what() << "\n";
     return 1;
   }
+  // A mesh body without a box has any shape: the default box is not its box, and the focus
+  // graded_focus derives from that box is not on its surface (the tool's site is found on the
+  // mesh, core/node_cloud.h). Such a body has a box and a focus only when the scene gives them,
+  // as its reference key is its mesh file (reference_file.h).
+  const bool has_box = scene.box_given || scene.distribution.type != DistributionType::mesh;
+  const bool has_focus = has_box || scene.distribution.focus_given;
   const Vec3 focus = graded_focus(scene);
   if (json) {
     nlohmann::json out;
@@ -93,7 +102,7 @@ int main(int argc, char** argv) {
     out["smallest_contact_radius"] = res.smallest_contact_radius;
     out["contact_spacing"] = res.contact_spacing;
     out["finest_spacing"] = res.finest_spacing();
-    out["focus"] = {focus[0], focus[1], focus[2]};
+    if (has_focus) out["focus"] = {focus[0], focus[1], focus[2]};
     out["inclusions"] = nlohmann::json::array();
     for (const RegionResolution& r : res.inclusions) {
       nlohmann::json inc = {
@@ -109,9 +118,10 @@ int main(int argc, char** argv) {
     std::cout << out.dump(2) << "\n";
   } else if (shell) {
     std::printf("focus_size=%.9g\n", res.contact_spacing);
-    std::printf("focus='%.17g %.17g %.17g'\n", focus[0], focus[1], focus[2]);
-    std::printf("box='%.17g %.17g %.17g %.17g %.17g %.17g'\n", scene.box.min[0], scene.box.min[1], scene.box.min[2],
-                scene.box.max[0], scene.box.max[1], scene.box.max[2]);
+    if (has_focus) std::printf("focus='%.17g %.17g %.17g'\n", focus[0], focus[1], focus[2]);
+    if (has_box)
+      std::printf("box='%.17g %.17g %.17g %.17g %.17g %.17g'\n", scene.box.min[0], scene.box.min[1], scene.box.min[2],
+                  scene.box.max[0], scene.box.max[1], scene.box.max[2]);
     std::printf("refine_count=%zu\n", res.inclusions.size());
     for (size_t k = 0; k < res.inclusions.size(); ++k) {
       const RegionResolution& r = res.inclusions[k];

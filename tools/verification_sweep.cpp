@@ -177,9 +177,9 @@ nlohmann::json sweep_json(const PreparedSweep& sweep, const std::vector<SweepRow
   out["max_spacing"] = model.max_spacing;
   out["integration_residual"] = model.integration_residual;
   out["integration_residual_nodal"] = model.integration_residual_nodal;
-  out["model"] = scene.model;
+  out["model"] = to_string(scene.model);
   // The continuum simulated: the MLS material law, or the hex FEM formulation.
-  out["law"] = scene.model == "hex_fem" ? to_string(scene.hex_fem.formulation) : to_string(scene.material.law);
+  out["law"] = scene.model == SolidKind::hex_fem ? to_string(scene.hex_fem.formulation) : to_string(scene.material.law);
   out["poisson_ratio"] = scene.material.poisson_ratio;
   out["indenter_radius"] = scene.indenter.radius;
   out["site"] = {sweep.site_x, sweep.site_y};  // m, the (x, y) of the top face pressed

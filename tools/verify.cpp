@@ -154,7 +154,7 @@ int main(int argc, char** argv) {
                  "palpate-verify: %s (%s), %d particles (%d fixed, %d regularised, worst cond(A) %.3g), spacing "
                  "%.4g ... %.4g m, sum of volumes %.4g m^3 (box %.4g), integration residual %.2g (nodal %.2g), "
                  "%s dt = %g s, damping %g 1/s, site (%g, %g) m\n",
-                 scene.name.c_str(), scene.model.c_str(), model.particle_count, model.fixed_count,
+                 scene.name.c_str(), to_string(scene.model), model.particle_count, model.fixed_count,
                  model.regularized_count, model.worst_condition, model.min_spacing, model.max_spacing,
                  model.total_volume, model.box_volume, model.integration_residual,
                  model.integration_residual_nodal, to_string(scene.integrator.type), scene.integrator.dt,

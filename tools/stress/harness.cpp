@@ -148,8 +148,8 @@ void write_csv(const std::filesystem::path& file, const std::vector<std::string>
   }
 }
 
-void write_out_dir(const std::filesystem::path& dir, const json& result, const json& zero_series,
-                   const json& zero_ratios, const json& long_periods) {
+void write_out_dir(const std::filesystem::path& dir, const std::filesystem::path& raw_dir, const json& result,
+                   const json& zero_series, const json& zero_ratios, const json& long_periods) {
   std::filesystem::create_directories(dir);
   if (result.contains("envelope"))
     write_csv(dir / "envelope.csv",
@@ -188,7 +188,9 @@ void write_out_dir(const std::filesystem::path& dir, const json& result, const j
   }
   if (result.contains("long_run"))
     write_csv(dir / "long_run.csv", {"t_s", "energy_j", "indentation_m", "max_speed_m_s", "inverted"}, long_periods);
-  std::ofstream(dir / "stress.json") << result.dump(2) << "\n";
+  const std::filesystem::path json_dir = raw_dir.empty() ? dir : raw_dir;
+  std::filesystem::create_directories(json_dir);
+  std::ofstream(json_dir / "stress.json") << result.dump(2) << "\n";
   const std::filesystem::path script = std::filesystem::path(PALPATE_SOURCE_DIR) / "scripts" / "plot_stability.py";
   const std::string command = "/usr/bin/python3 '" + script.string() + "' '" + dir.string() + "' 1>&2";
   if (std::filesystem::exists("/usr/bin/python3") && std::filesystem::exists(script)) {

@@ -34,6 +34,7 @@ struct StressOptions {
   bool json = false, quiet = false;
   bool graded_implicit = false;  // implicit Euler on the graded clouds: minutes per trial
   std::filesystem::path out;
+  std::filesystem::path raw;  // --raw: where stress.json goes (empty: `out`)
   bool wants(const std::string& study) const;
 };
 
@@ -117,8 +118,8 @@ PhaseStats run_phase(const Model& model, const Options& opt, State& state, doubl
 void write_csv(const std::filesystem::path& file, const std::vector<std::string>& columns, const json& rows);
 
 // --out DIR: the CSV file of every study in `result`, the series and ratios CSV files,
-// stress.json, then scripts/plot_stability.py for the figures.
-void write_out_dir(const std::filesystem::path& dir, const json& result, const json& zero_series,
-                   const json& zero_ratios, const json& long_periods);
+// stress.json (in `raw_dir`, --raw, when not empty), then scripts/plot_stability.py for the figures.
+void write_out_dir(const std::filesystem::path& dir, const std::filesystem::path& raw_dir, const json& result,
+                   const json& zero_series, const json& zero_ratios, const json& long_periods);
 
 }  // namespace palpate::stress

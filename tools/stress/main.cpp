@@ -39,6 +39,8 @@ Maps the stable envelope and runs the stress studies (docs/stability.md).
   --json            print one JSON object on stdout (progress stays on stderr)
   --out DIR         write CSV files and the JSON there, then scripts/plot_stability.py
                     makes the PNG figures (needs /usr/bin/python3 with matplotlib)
+  --raw DIR         with --out: stress.json goes to DIR instead (the repository keeps
+                    it under data/stability/, data/README.md)
   --quiet           no progress on stderr
 )";
 
@@ -65,6 +67,7 @@ int main(int argc, char** argv) {
       else if (arg == "--json") stress.json = true;
       else if (arg == "--graded-implicit") stress.graded_implicit = true;
       else if (arg == "--out") stress.out = value();
+      else if (arg == "--raw") stress.raw = value();
       else if (arg == "--quiet") stress.quiet = true;
       else if (arg == "--help" || arg == "-h") {
         std::cout << kUsage;
@@ -100,7 +103,7 @@ int main(int argc, char** argv) {
   result["definitions"] = meta;
   result["wall_seconds"] = seconds_since_start();
 
-  if (!stress.out.empty()) write_out_dir(stress.out, result, zero_series, zero_ratios, long_periods);
+  if (!stress.out.empty()) write_out_dir(stress.out, stress.raw, result, zero_series, zero_ratios, long_periods);
   if (stress.json) std::cout << result.dump(2) << "\n";
   else if (stress.out.empty()) std::cout << result.dump(2) << "\n";
   return 0;
