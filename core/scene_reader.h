@@ -3,6 +3,7 @@
 // pointer, read through accessors that throw a SceneError naming the pointer, the source and
 // the reason; the number ranges and the names of enumerated values those messages quote; the
 // JSON text and the "key=value" overrides (docs/scene-format.md).
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -51,8 +52,9 @@ std::string join_names(const List& list) {
   return out;
 }
 
-template <class T, std::size_t N>
-const char* name_for(const Named<T> (&names)[N], T value) {
+// The name of `value` in `names` (a C array or a std::array of Named<T>).
+template <class List, class T>
+const char* name_for(const List& names, T value) {
   for (const auto& n : names)
     if (n.value == value) return n.name.data();  // the names are NUL-terminated literals
   return "?";
@@ -231,6 +233,10 @@ class Reader {
 
   template <class T, std::size_t N>
   void get(T& out, std::string_view what, const Named<T> (&names)[N]) const {
+    if (const auto* n = pick(what, names)) out = n->value;
+  }
+  template <class T, std::size_t N>
+  void get(T& out, std::string_view what, const std::array<Named<T>, N>& names) const {
     if (const auto* n = pick(what, names)) out = n->value;
   }
 

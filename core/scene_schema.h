@@ -3,12 +3,15 @@
 // file. The names of enumerated values (parsing, messages and to_string) and the keys of every
 // object in document order (the one list the reader checks keys against and
 // scene_field_paths() reports; docs/scene-format.md documents them in this order).
+#include <array>
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "core/laws/laws.h"
 #include "core/scene_reader.h"
 
 namespace palpate::scene_io {
@@ -37,9 +40,13 @@ inline constexpr Named<IntegrationRule> kIntegrationRules[] = {
     {"consistent", IntegrationRule::consistent},
 };
 
-inline constexpr Named<MaterialLaw> kMaterialLaws[] = {
-    {"stvk", MaterialLaw::stvk}, {"corotational", MaterialLaw::corotational}, {"linear", MaterialLaw::linear},
-    {"neo_hookean", MaterialLaw::neo_hookean}};
+// The material laws (material.law): the one list of the laws, core/laws/laws.h.
+inline constexpr auto kMaterialLaws = [] {
+  std::array<Named<MaterialLaw>, mls::material_law_names.size()> names{};
+  for (std::size_t k = 0; k < names.size(); ++k)
+    names[k] = {mls::material_law_names[k].first, mls::material_law_names[k].second};
+  return names;
+}();
 inline constexpr Named<DistributionType> kDistributions[] = {
     {"grid", DistributionType::grid},
     {"jittered_grid", DistributionType::jittered_grid},
