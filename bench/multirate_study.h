@@ -33,7 +33,7 @@ class HeadlessSession {
   HeadlessSession(Scene scene, bool contact_stiffness, double touch_lookahead = 0.0);
   // One tick with the device at x; the frame it published.
   const server::Snapshot& step(const Vec3& x);
-  const Model& model() const { return sim_.model(); }
+  const Model& model() const { return sim_.shown_model(); }
   CouplingOptions coupling() const { return sim_.initial_coupling(); }
   double seconds() const { return seconds_; }  // wall time spent stepping
 

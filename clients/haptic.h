@@ -213,6 +213,8 @@ struct ServerStats {
   uint64_t haptic_misses = 0;
   double haptic_lateness_p99_us = 0;
   double model_age_p50_us = 0, model_age_p99_us = 0, model_age_max_us = 0;
+  // A scene whose cloud follows the tool: refocuses swapped in, and dropped (Stats.refocuses).
+  uint64_t refocuses = 0, refocuses_dropped = 0;
 };
 
 struct Result {

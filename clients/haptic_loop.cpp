@@ -256,6 +256,8 @@ Result run_palpation(wire::Session::Client session, wire::SessionInfo::Reader in
   s.skipped_ticks = stats.getSkippedTicks();
   s.blow_ups = stats.getBlowUps();
   s.realtime_priority = stats.getRealtimePriority();
+  s.refocuses = stats.getRefocuses();
+  s.refocuses_dropped = stats.getRefocusesDropped();
   for (auto sub_stats : stats.getSubscribers())
     if (sub_stats.getRateHz() == 0) s.frames_dropped += sub_stats.getDropped();
   s.haptic_rate_hz = stats.getHapticRateHz();

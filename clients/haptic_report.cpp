@@ -44,6 +44,9 @@ void print_report(std::FILE* out, const Result& r) {
                s.lateness_p50_us, s.lateness_p99_us, s.lateness_max_us,
                static_cast<unsigned long long>(s.deadline_misses), static_cast<long long>(s.ticks),
                static_cast<unsigned long long>(s.skipped_ticks), s.blow_ups, s.realtime_priority ? ", SCHED_FIFO" : "");
+  if (s.refocuses > 0 || s.refocuses_dropped > 0)
+    std::fprintf(out, "refocus           %llu swapped in, %llu dropped (the cloud follows the tool)\n",
+                 static_cast<unsigned long long>(s.refocuses), static_cast<unsigned long long>(s.refocuses_dropped));
   if (s.haptic_rate_hz > 0) {
     std::fprintf(out, "multirate         render ticks at %.0f Hz: %lld, misses %llu, lateness p99 %.0f us; model age "
                  "p50 %.2f ms, p99 %.2f ms, max %.2f ms (frames received: p50 %.2f ms, p99 %.2f ms)\n",
@@ -87,6 +90,8 @@ std::string json_fields(const Result& r) {
                   ", \"deadline_misses\": " + std::to_string(s.deadline_misses) + ", \"skipped_ticks\": " +
                   std::to_string(s.skipped_ticks) + ", \"blow_ups\": " + std::to_string(s.blow_ups) +
                   ", \"realtime_priority\": " + (s.realtime_priority ? "true" : "false") +
+                  ", \"refocuses\": " + std::to_string(s.refocuses) +
+                  ", \"refocuses_dropped\": " + std::to_string(s.refocuses_dropped) +
                   ", \"haptic_rate_hz\": " + number(s.haptic_rate_hz) + ", \"haptic_ticks\": " +
                   std::to_string(s.haptic_ticks) + ", \"haptic_misses\": " + std::to_string(s.haptic_misses) +
                   ", \"haptic_lateness_p99_us\": " + number(s.haptic_lateness_p99_us) +

@@ -57,6 +57,8 @@ NodeCloud tensor_lattice(const std::vector<double> (&coord)[3]) {
   return cloud;
 }
 
+}  // namespace
+
 // What the model keeps of a mesh.
 NodeCloud mesh_cloud(const TetMesh& mesh) {
   NodeCloud cloud;
@@ -72,8 +74,6 @@ NodeCloud mesh_cloud(const TetMesh& mesh) {
   cloud.boundary_triangles = mesh.boundary_faces;
   return cloud;
 }
-
-}  // namespace
 
 Eigen::Vector3i nodes_per_axis(const BoxSpec& box, double spacing) {
   Eigen::Vector3i n;

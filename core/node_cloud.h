@@ -76,6 +76,8 @@ Vec3 tool_centre(const Scene& scene, const TetMesh& mesh);
 // The point a mesh's refinement aims at when the tool's centre is `tool`: distribution.focus
 // when given, else the point of the base's boundary surface nearest the tool.
 Vec3 refinement_focus(const Scene& scene, const TetMesh& base, const Vec3& tool);
+// The cloud of a mesh, as it is (its nodes, nodal volumes, tetrahedra and surface groups).
+NodeCloud mesh_cloud(const TetMesh& mesh);
 // The cloud of a mesh distribution from its (already read and checked) base mesh: the base
 // itself, or with distribution.refine the base refined (core/mesh_refinement.h) toward
 // distribution.focus when given, else toward the point of the body's surface nearest `tool`

@@ -22,10 +22,15 @@ constexpr size_t kMaxRecords = 4096;
 
 }  // namespace
 
-FollowingModel::FollowingModel(const Scene& scene, const Vec3& tool, const RefocusOptions& options, bool background)
-    : scene_(scene), options_(options), background_(background) {
+bool follows_tool(const Scene& scene) {
   const DistributionSpec& d = scene.distribution;
-  if (d.type != DistributionType::mesh || !d.refine.enabled() || d.focus_given)
+  return d.type == DistributionType::mesh && d.refine.enabled() && !d.focus_given;
+}
+
+FollowingModel::FollowingModel(const Scene& scene, const std::optional<Vec3>& tool, const RefocusOptions& options,
+                               bool background, CompanionFactory make_companion)
+    : scene_(scene), options_(options), background_(background), make_companion_(std::move(make_companion)) {
+  if (!follows_tool(scene))
     throw std::invalid_argument(scene.source +
                                 ": a cloud that follows the tool needs a mesh distribution with \"refine\" and "
                                 "without \"focus\" (body.distribution)");
@@ -33,16 +38,13 @@ FollowingModel::FollowingModel(const Scene& scene, const Vec3& tool, const Refoc
   if (options.settle_steps < 1) throw std::invalid_argument("refocus settle_steps must be >= 1");
   if (options.fade_steps < 0) throw std::invalid_argument("refocus fade_steps must be >= 0");
   if (!(options.latency >= 0)) throw std::invalid_argument("refocus latency must be >= 0 s");
-  base_ = read_mesh(d.mesh_file);
-  aim_ = tool;
-  current_ = std::make_unique<Cloud>();
-  auto t = std::chrono::steady_clock::now();
-  current_->focus = refinement_focus(scene_, base_, tool);
-  current_->cloud = refined_mesh_cloud(scene_, base_, tool);
-  current_->refine_ms = ms_since(t);
-  t = std::chrono::steady_clock::now();
-  current_->model = build_model(scene_, current_->cloud);
-  current_->build_ms = ms_since(t);
+  base_ = read_mesh(scene.distribution.mesh_file);
+  base_cloud_ = mesh_cloud(base_);
+  base_model_ = build_model(scene_, base_cloud_);
+  aim_ = tool ? *tool : tool_centre(scene_, base_);
+  Options rest_options = options_of(scene_);
+  rest_options.integrator.threads = 1;  // the companion's rest state only (the caller's state has the caller's threads)
+  current_ = make_cloud(aim_, rest_options, nullptr);
   expected_delay_ = options.latency;
   records_.reserve(kMaxRecords);
   if (background_) worker_ = std::thread(&FollowingModel::worker_loop, this);
@@ -61,26 +63,57 @@ void FollowingModel::signal() {
   signal_.notify_one();
 }
 
+// A cloud refined toward `tool`: its model, its weights in the base mesh, and the companion
+// made from its rest state (returned in *rest when asked for).
+std::unique_ptr<FollowingModel::Cloud> FollowingModel::make_cloud(const Vec3& tool, const Options& opt,
+                                                                  std::unique_ptr<State>* rest) {
+  auto c = std::make_unique<Cloud>();
+  auto t = std::chrono::steady_clock::now();
+  c->focus = refinement_focus(scene_, base_, tool);
+  c->cloud = refined_mesh_cloud(scene_, base_, tool);
+  c->refine_ms = ms_since(t);
+  t = std::chrono::steady_clock::now();
+  c->model = build_model(scene_, c->cloud);
+  c->build_ms = ms_since(t);
+  c->in_base = make_cloud_transfer(base_model_.rest_position, base_cloud_.tetrahedra, c->model.rest_position,
+                                   c->cloud.tetrahedra);
+  if (make_companion_ || rest) {
+    auto state = std::make_unique<State>(make_state(c->model, opt));
+    if (make_companion_) c->companion = make_companion_(c->model, *state);
+    if (rest) *rest = std::move(state);
+  }
+  return c;
+}
+
 // Stage 2: the cloud refined toward aim_, its model, the transfer weights from the current
 // cloud and the new cloud's State. The retired cloud and state of the last swap are freed here.
 void FollowingModel::build_next() {
   retired_.reset();
   shadow_.reset();
-  auto next = std::make_unique<Cloud>();
-  auto t = std::chrono::steady_clock::now();
-  next->focus = refinement_focus(scene_, base_, aim_);
-  next->cloud = refined_mesh_cloud(scene_, base_, aim_);
-  next->refine_ms = ms_since(t);
-  t = std::chrono::steady_clock::now();
-  next->model = build_model(scene_, next->cloud);
-  next->build_ms = ms_since(t);
-  t = std::chrono::steady_clock::now();
+  std::unique_ptr<State> rest;
+  auto next = make_cloud(aim_, shadow_options_, &rest);
+  const auto t = std::chrono::steady_clock::now();
   transfer_ = make_cloud_transfer(current_->model.rest_position, current_->cloud.tetrahedra, next->model.rest_position,
                                   next->cloud.tetrahedra);
   weights_ms_ = ms_since(t);
-  shadow_ = std::make_unique<State>(make_state(next->model, shadow_options_));
+  shadow_ = std::move(rest);
   use_threads(next->model, shadow_options_, *shadow_);
   next_ = std::move(next);
+}
+
+void FollowingModel::state_jumped(const std::string& why) {
+  offset_tick_ = -1;
+  checked_ = false;
+  int phase = kShadowing;
+  if (background_) {
+    if (phase_.compare_exchange_strong(phase, kDropping, std::memory_order_acq_rel)) {
+      drop(why);
+      signal();  // the worker sets kIdle when it has stopped
+    }
+  } else if (phase_.load(std::memory_order_relaxed) == kShadowing) {
+    drop(why);
+    phase_.store(kIdle, std::memory_order_release);
+  }
 }
 
 bool FollowingModel::step_shadow(const ToolEntry& entry) {

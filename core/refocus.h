@@ -28,7 +28,9 @@
 // nothing (the retired cloud is freed on the worker).
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -65,12 +67,25 @@ struct RefocusRecord {
   double carry_ms = 0;               // transfer_state on the caller's thread
 };
 
+// A scene whose cloud follows the tool: a mesh distribution with "refine" and without "focus".
+bool follows_tool(const Scene& scene);
+
+// What a caller keeps beside each cloud (a session: its contact-stiffness worker and its
+// checkpoints, all sized for that cloud's model), made by the caller's factory from the
+// cloud's model and its rest state (make_state) on the thread that builds the cloud (the
+// worker in background mode: never the real-time thread), and freed with the cloud, before
+// its model. What the factory throws drops the refocus like a failed build.
+using CloudCompanion = std::shared_ptr<void>;
+using CompanionFactory = std::function<CloudCompanion(const Model& model, const State& rest)>;
+
 class FollowingModel {
  public:
-  // The model refined toward the tool at `tool` (m), the scene's base mesh read from its file.
-  // Throws std::invalid_argument unless the scene's distribution is a mesh with "refine" and
-  // without "focus". background: build and shadow on a worker thread of its own.
-  FollowingModel(const Scene& scene, const Vec3& tool, const RefocusOptions& options, bool background);
+  // The model refined toward the tool at `tool` (m; none: where the scene starts it,
+  // tool_centre), the scene's base mesh read from its file. Throws std::invalid_argument
+  // unless follows_tool(scene). background: build and shadow on a worker thread of its own.
+  // make_companion (optional): see CloudCompanion; called here for the first cloud too.
+  FollowingModel(const Scene& scene, const std::optional<Vec3>& tool, const RefocusOptions& options,
+                 bool background, CompanionFactory make_companion = {});
   ~FollowingModel();  // stops and joins the worker (an unfinished refocus is dropped)
   FollowingModel(const FollowingModel&) = delete;
   FollowingModel& operator=(const FollowingModel&) = delete;
@@ -79,6 +94,23 @@ class FollowingModel {
   const Model& model() const { return current_->model; }
   const NodeCloud& cloud() const { return current_->cloud; }
   const Vec3& focus() const { return current_->focus; }
+  // The companion the factory made for the current cloud (null without a factory).
+  void* companion() const { return current_->companion.get(); }
+
+  // The base mesh's own model (unrefined): what a viewer is shown, one topology whatever the
+  // cloud. Its particles are the first base_model().particle_count particles of every cloud,
+  // at the same reference positions (refine_mesh keeps the base's vertices and indices).
+  const Model& base_model() const { return base_model_; }
+  // The current cloud located in the base mesh (7.2): for each particle of model(), its
+  // barycentric weights over base particles (the first terms, offset/source/weight). A force
+  // on a particle shown on the base shares out by these weights: the total is kept.
+  const CloudTransfer& base_weights() const { return current_->in_base; }
+
+  // The caller's state jumped (a reset, a recovery to a checkpoint): a refocus already carried
+  // is dropped (its shadow follows a state that no longer is; counted in dropped_count() with
+  // `why`), and the fading offset of the last swap is cancelled. A cloud being built is kept:
+  // it is carried from the state as it will be then.
+  void state_jumped(const std::string& why);
 
   // Call before each step of model() with `state` (its tool command and target already set
   // for the step). Asks, carries, feeds the shadow and swaps when their time has come. Returns
@@ -112,6 +144,8 @@ class FollowingModel {
     Model model;
     Vec3 focus{0, 0, 0};
     double refine_ms = 0, build_ms = 0;
+    CloudTransfer in_base;     // see base_weights()
+    CloudCompanion companion;  // last: freed before the model it was made for
   };
   // The tool before one step of the current model: what the shadow's step starts from.
   struct ToolEntry {
@@ -121,6 +155,7 @@ class FollowingModel {
 
   enum Phase : int { kIdle, kAsked, kBuilt, kShadowing, kDropping, kFailed };  // phase_, see worker_loop
 
+  std::unique_ptr<Cloud> make_cloud(const Vec3& tool, const Options& opt, std::unique_ptr<State>* rest);
   void build_next();               // stage 2 (worker or inline)
   bool step_shadow(const ToolEntry& entry);  // one shadow step; false: it failed
   void worker_loop();
@@ -129,8 +164,11 @@ class FollowingModel {
 
   Scene scene_;
   TetMesh base_;
+  NodeCloud base_cloud_;
+  Model base_model_;
   RefocusOptions options_;
   bool background_;
+  CompanionFactory make_companion_;
   std::unique_ptr<Cloud> current_, next_, retired_;
   std::unique_ptr<State> shadow_;
   CloudTransfer transfer_;

@@ -440,6 +440,8 @@ struct Stats {
   hapticMisses @21 :UInt64;       # render ticks that ended after the next one's deadline
   hapticLatenessUs @22 :Percentiles;  # render tick start minus its deadline, us
   modelAgeUs @23 :Percentiles;    # at each render tick, the age of the step it rendered from, us
+  refocuses @24 :UInt64;          # a cloud that follows the tool: refocuses swapped in (docs/physics.md §7)
+  refocusesDropped @25 :UInt64;   # and those dropped (a failed build or shadow, a reset or recovery)
 }
 
 enum RunState {

@@ -45,6 +45,10 @@ class StiffnessSource {
   // The state jumped (reset, a recovered blow-up): results and warm starts from before
   // are dropped.
   void invalidate();
+  // The newest result of another cloud's source of the same body, at a refocus's swap
+  // (core/refocus.h): it serves (origin, radius and tick its own) until this source has
+  // evaluated the new cloud.
+  void carry_over(const LocalContactModel& newest) { newest_ = newest; }
   // The newest result taken (tick -1: none since the start or the last invalidate()).
   const LocalContactModel& newest() const { return newest_; }
   uint64_t evaluations() const { return evaluations_.load(std::memory_order_relaxed); }

@@ -80,7 +80,7 @@ kj::Promise<void> SessionImpl::send_done(wire::FrameSink::Client& sink, const ch
 void SessionImpl::fill_info(wire::SessionInfo::Builder info, bool control) {
   KJ_ASSERT(phase_ == Phase::ready);
   info.setControl(control);
-  const Model& m = sim_->model();
+  const Model& m = sim_->shown_model();
   const Scene& s = sim_->scene();
   info.setSceneName(s.name);
   info.setParticleCount(static_cast<uint32_t>(m.particle_count));
@@ -149,7 +149,7 @@ kj::Promise<void> SessionImpl::setForceVector(SetForceVectorContext context) {
 kj::Promise<void> SessionImpl::setPosition(SetPositionContext context) {
   check_open("setPosition");
   const Vec3 x = from_wire(context.getParams().getPosition());
-  const Model& m = sim_->model();
+  const Model& m = sim_->shown_model();
   check_position(x, m.tool_workspace_min, m.tool_workspace_max);
   auto results = context.getResults();
   results.setSeq(check_queued("setPosition", sim_->enqueue(CommandType::set_position, x)));
@@ -241,6 +241,8 @@ kj::Promise<void> SessionImpl::stats(StatsContext context) {
   s.setMissesLongStep(c.misses_long_step);
   s.setPinned(c.pinned);
   s.setWatchdogYields(c.watchdog_rests);
+  s.setRefocuses(static_cast<uint64_t>(c.refocuses));
+  s.setRefocusesDropped(static_cast<uint64_t>(c.refocuses_dropped));
   if (HapticRenderer* h = phase_ == Phase::ready ? sim_->haptic() : nullptr) {
     s.setHapticRateHz(h->rate_hz());
     s.setHapticTicks(c.haptic.ticks);
@@ -333,7 +335,7 @@ void SessionImpl::check_phase() {
   } else if (phase_ == Phase::ready) {
     force_limit_ = force_limit(sim_->scene());
     coupling_ = sim_->initial_coupling();
-    const auto& triangles = sim_->model().surface_triangles;
+    const auto& triangles = sim_->shown_model().surface_triangles;
     surface_vertices_.assign(triangles.data(), triangles.data() + triangles.size());
     std::sort(surface_vertices_.begin(), surface_vertices_.end());
     surface_vertices_.erase(std::unique(surface_vertices_.begin(), surface_vertices_.end()), surface_vertices_.end());
@@ -430,7 +432,7 @@ void SessionImpl::check_fields(const char* field, const FieldRequest& fields) {
 }
 
 const DerivedFields* SessionImpl::derived_for(const Snapshot& s, const FieldRequest& want) {
-  return derived_fields(sim_->model(), s, want, derived_);
+  return derived_fields(sim_->shown_model(), s, want, derived_);
 }
 
 

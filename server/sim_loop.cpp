@@ -148,6 +148,8 @@ SimCounters Simulation::counters() const {
   c.misses_long_step = misses_long_step_.load(std::memory_order_relaxed);
   c.stiffness_evaluations = stiffness_evaluations_.load(std::memory_order_relaxed);
   c.watchdog_rests = watchdog_rests_.load(std::memory_order_relaxed);
+  c.refocuses = refocuses_.load(std::memory_order_relaxed);
+  c.refocuses_dropped = refocuses_dropped_.load(std::memory_order_relaxed);
   c.step_us = step_us_.summary();
   c.lateness_us = lateness_us_.summary();
   if (phase() == Phase::ready && haptic_) c.haptic = haptic_->counters();
@@ -182,25 +184,37 @@ void Simulation::prepare_and_build() {
   }
   check_cancelled();
   const int64_t t0 = now_ns();
-  model_ = std::make_unique<Model>(build_model(scene_));
-  check_cancelled();
   options_ = options_of(scene_);
+  auto companion_maker = [this](const Model& model, const State& rest) { return make_companion(model, rest); };
+  if (follows_tool(scene_)) {
+    following_ = std::make_unique<FollowingModel>(scene_, std::nullopt, config_.refocus, !config_.headless,
+                                                  companion_maker);
+    stepped_ = &following_->model();
+    shown_ = &following_->base_model();
+    companion_ = static_cast<Companion*>(following_->companion());
+  } else {
+    model_ = std::make_unique<Model>(build_model(scene_));
+    stepped_ = shown_ = model_.get();
+  }
+  check_cancelled();
   initial_options_ = options_;
   coupling_ = config_.coupling.stiffness > 0.0 ? clamp_to_device(config_.coupling, config_.device)
-                                               : default_coupling(*model_, options_, config_.device);
+                                               : default_coupling(*stepped_, options_, config_.device);
   initial_coupling_ = coupling_;
-  state_ = std::make_unique<State>(make_state(*model_, options_));
-  divergence_bound_ = divergence_bound(*model_);
-  if (config_.contact_stiffness) {
-    stiffness_ = std::make_unique<StiffnessSource>(*model_, !config_.headless, config_.touch_lookahead);
-    stiffness_->prime(*state_);
+  state_ = std::make_unique<State>(make_state(*stepped_, options_));
+  if (!following_) {
+    own_companion_ = make_companion(*model_, *state_);
+    companion_ = static_cast<Companion*>(own_companion_.get());
   }
+  divergence_bound_ = divergence_bound(*shown_);
+  if (companion_->stiffness) companion_->stiffness->prime(*state_);
+  shown_force_.assign(3 * static_cast<size_t>(shown_->particle_count), 0.0);
+  shown_touched_.reserve(static_cast<size_t>(shown_->particle_count));
+  shown_marked_.assign(static_cast<size_t>(shown_->particle_count), 0);
   if (config_.haptic_rate_hz > 0.0 && !config_.headless)
     haptic_ = std::make_unique<HapticRenderer>(config_.haptic_rate_hz, config_.device.max_force, config_.spin_margin_us,
                                                config_.try_realtime, wake_fd_, config_.rpc_heartbeat);
-  rest_ = std::make_unique<Checkpoint>(*state_);
-  checkpoint_ = std::make_unique<Checkpoint>(*state_);
-  SnapshotBuffer frames([n = model_->particle_count](Snapshot& s) { s.reserve(n); });
+  SnapshotBuffer frames([n = shown_->particle_count](Snapshot& s) { s.reserve(n); });
   frames_writer_ = std::move(frames.writer);
   frames_reader_ = std::move(frames.reader);
   build_seconds_ = (now_ns() - t0) * 1e-9;
@@ -334,8 +348,31 @@ void Simulation::configure_workers(bool realtime) {
   if (refused.load() > 0) spdlog::warn("{} of the step's worker threads kept their policy or affinity", refused.load());
 }
 
+// Made on the thread that builds the model (the refocus worker for a cloud that follows the
+// tool), never the loop's: the stiffness source starts its thread and sizes its buffers.
+CloudCompanion Simulation::make_companion(const Model& model, const State& rest) const {
+  auto c = std::make_shared<Companion>(rest);
+  if (config_.contact_stiffness)
+    c->stiffness = std::make_unique<StiffnessSource>(model, !config_.headless, config_.touch_lookahead);
+  return c;
+}
+
+// After a refocus's swap: the state is the new cloud's. The new cloud's stiffness source
+// starts from the old one's newest result (the same body, a moment ago); the checkpoint
+// becomes this state. The old cloud and its companion are freed on the refocus worker.
+void Simulation::take_new_cloud() {
+  Companion* next = static_cast<Companion*>(following_->companion());
+  if (companion_->stiffness) {
+    next->stiffness->carry_over(companion_->stiffness->newest());
+    stiffness_evaluations_retired_ += companion_->stiffness->evaluations();
+  }
+  companion_ = next;
+  stepped_ = &following_->model();
+  companion_->checkpoint.save(*state_);
+  refocuses_.store(following_->refocus_count(), std::memory_order_relaxed);
+}
+
 bool Simulation::tick_once() {
-  const Model& model = *model_;
   State& state = *state_;
   // Every command published so far, without a lock (see command_ring_ in sim_loop.h).
   const uint64_t published = commands_written_.load(std::memory_order_acquire);
@@ -357,13 +394,14 @@ bool Simulation::tick_once() {
         set_position_mode(position_mode_);
         break;
       case CommandType::reset: {
-        rest_->restore(state);
-        checkpoint_->save(state);
+        companion_->rest.restore(state);
+        companion_->checkpoint.save(state);
         state.time = 0.0;
         state.tick = 0;
-        state.force_command = press_down(model.initial_force_command);
+        state.force_command = press_down(stepped_->initial_force_command);
         set_position_mode(false);
-        if (stiffness_) stiffness_->invalidate();
+        if (companion_->stiffness) companion_->stiffness->invalidate();
+        if (following_) following_->state_jumped("the session was reset");
         ticks_since_recovery_ = -1;
         break;
       }
@@ -382,8 +420,13 @@ bool Simulation::tick_once() {
     return false;
   }
 
-  if (config_.before_step_for_tests) config_.before_step_for_tests(state);  // TEST HOOK (empty in the server)
   const int64_t t0 = now_ns();
+  if (following_) {
+    if (following_->before_step(options_, state)) take_new_cloud();
+    refocuses_dropped_.store(following_->dropped_count(), std::memory_order_relaxed);
+  }
+  if (config_.before_step_for_tests) config_.before_step_for_tests(state);  // TEST HOOK (empty in the server)
+  const Model& model = *stepped_;
   const StepStatus status = step(model, options_, state);
   const int64_t t1 = now_ns();
   step_us_.add((t1 - t0) * 1e-3);
@@ -394,7 +437,8 @@ bool Simulation::tick_once() {
   // A failed health check (health.h) or a state gone far away: back to the last good state.
   if (is_fault(status)) recover(describe(state.health.report));
   else if (diverged(model, state, divergence_bound_)) recover("diverged state (displacement beyond 10 box diagonals)");
-  else if (config_.checkpoint_interval > 0 && state.tick % config_.checkpoint_interval == 0) checkpoint_->save(state);
+  else if (config_.checkpoint_interval > 0 && state.tick % config_.checkpoint_interval == 0)
+    companion_->checkpoint.save(state);
   return true;
 }
 
@@ -408,7 +452,7 @@ void Simulation::set_position_mode(bool on) {
 // checkpoint itself was on its way out (or the command cannot be held): restore
 // the rest state and the scene's initial force instead.
 void Simulation::recover(const std::string& what) {
-  const Model& model = *model_;
+  const Model& model = *stepped_;
   State& state = *state_;
   blow_ups_.fetch_add(1, std::memory_order_relaxed);
   const bool again = ticks_since_recovery_ >= 0 && ticks_since_recovery_ <= 2 * config_.checkpoint_interval;
@@ -416,8 +460,8 @@ void Simulation::recover(const std::string& what) {
   const double command = pressing_force(state);
   const bool position_mode = position_mode_;
   if (again) {
-    rest_->restore(state);
-    checkpoint_->save(state);
+    companion_->rest.restore(state);
+    companion_->checkpoint.save(state);
     state.force_command = press_down(model.initial_force_command);
     set_position_mode(false);
     status_force_.store(pressing_force(state), std::memory_order_relaxed);
@@ -426,11 +470,12 @@ void Simulation::recover(const std::string& what) {
           " N; the command was " +
           (position_mode ? std::string("a position, now back in force mode") : std::to_string(command) + " N") + ")";
   } else {
-    checkpoint_->restore(state);
+    companion_->checkpoint.restore(state);
     how = "restored the last checkpoint (every " + std::to_string(config_.checkpoint_interval) + " ticks)";
   }
   ticks_since_recovery_ = 0;
-  if (stiffness_) stiffness_->invalidate();
+  if (companion_->stiffness) companion_->stiffness->invalidate();
+  if (following_) following_->state_jumped("the state was recovered (" + what + ")");
   const std::string message = what + ": " + how;
   {
     std::lock_guard<std::mutex> lock(text_mutex_);
@@ -442,7 +487,7 @@ void Simulation::recover(const std::string& what) {
 
 // The frame's local models (wire LocalModel): the contact force as a function of the
 // tool's centre, and the rendered force as a function of the device position.
-void Simulation::fill_local_models(Snapshot& s) const {
+void Simulation::fill_local_models(Snapshot& s, const Vec3& contact_force) const {
   const State& state = *state_;
   static const LocalContactModel none = [] {
     LocalContactModel m;
@@ -450,34 +495,77 @@ void Simulation::fill_local_models(Snapshot& s) const {
     return m;
   }();
   s.tool_touching = !state.contact_index.empty();
-  s.stiffness_source = stiffness_ ? stiffness_->newest() : none;
-  s.contact_model = contact_model_now(state, s.stiffness_source);
+  s.stiffness_source = companion_->stiffness ? companion_->stiffness->newest() : none;
+  s.contact_model = contact_model_now(state.indenter_center, contact_force, s.tool_touching, s.stiffness_source);
   // The render model's radius in contact: half the model's smallest particle spacing.
   s.render_model = render_model(s.contact_model, position_mode_, state.tool_target, s.render_force,
-                                options_.coupling, 0.5 * model_->min_spacing);
+                                options_.coupling, 0.5 * stepped_->min_spacing);
+}
+
+// The contact forces on the shown particles: the stepped model's own, or for a cloud that
+// follows the tool, each particle's force shared out to the base particles by its weights in
+// the base mesh (the total kept). No allocation: the scratch and the frame are sized once.
+void Simulation::show_contacts(Snapshot& s) {
+  const State& state = *state_;
+  const size_t m = state.contact_index.size();
+  if (!following_) {
+    for (size_t c = 0; c < m; ++c) {
+      s.contact_nodes.push_back(static_cast<uint32_t>(state.contact_index[c]));
+      for (int a = 0; a < 3; ++a) s.contact_forces.push_back(static_cast<float>(state.contact_force(a, c)));
+    }
+    return;
+  }
+  const CloudTransfer& in_base = following_->base_weights();
+  shown_touched_.clear();
+  for (size_t c = 0; c < m; ++c) {
+    const int i = state.contact_index[c];
+    for (int k = in_base.offset[i]; k < in_base.offset[i + 1]; ++k) {
+      const int b = in_base.source[k];
+      double* f = &shown_force_[3 * static_cast<size_t>(b)];
+      if (!shown_marked_[b]) {
+        shown_marked_[b] = 1;
+        shown_touched_.push_back(b);
+      }
+      for (int a = 0; a < 3; ++a) f[a] += in_base.weight[k] * state.contact_force(a, static_cast<Eigen::Index>(c));
+    }
+  }
+  for (const int b : shown_touched_) {
+    double* f = &shown_force_[3 * static_cast<size_t>(b)];
+    s.contact_nodes.push_back(static_cast<uint32_t>(b));
+    for (int a = 0; a < 3; ++a) {
+      s.contact_forces.push_back(static_cast<float>(f[a]));
+      f[a] = 0.0;
+    }
+    shown_marked_[b] = 0;
+  }
 }
 
 void Simulation::publish() {
-  const Model& model = *model_;
+  const Model& model = *stepped_;
   const State& state = *state_;
-  if (stiffness_) {
-    stiffness_->offer(state);
-    stiffness_evaluations_.store(stiffness_->evaluations(), std::memory_order_relaxed);
+  if (companion_->stiffness) {
+    companion_->stiffness->offer(state);
+    stiffness_evaluations_.store(stiffness_evaluations_retired_ + companion_->stiffness->evaluations(),
+                                 std::memory_order_relaxed);
   }
+  // The force a device is given: the contact force, and after a refocus's swap the fading
+  // offset between the two clouds' forces (docs/physics.md (7.3)).
+  const Vec3 contact_force =
+      following_ ? Vec3(state.indenter_contact_force + following_->force_offset(state)) : state.indenter_contact_force;
   Snapshot& s = frames_writer_.back();
   s.tick = state.tick;
   s.sim_time = state.time;
   s.tool_position = state.indenter_center;
   s.tool_velocity = state.indenter_velocity;
-  s.tool_contact_force = state.indenter_contact_force;
+  s.tool_contact_force = contact_force;
   s.force_command = state.force_command;
   s.position_mode = position_mode_;
   s.target = state.tool_target;
   // Position mode: the device feels the coupling's reaction, -(its force on the tool);
   // force mode: the contact force, as if the device held the tool rigidly.
-  s.render_force = position_mode_ ? Vec3(-state.out.coupling_force) : state.indenter_contact_force;
+  s.render_force = position_mode_ ? Vec3(-state.out.coupling_force) : contact_force;
   s.force_saturated = saturate(s.render_force, config_.device.max_force);
-  fill_local_models(s);
+  fill_local_models(s, contact_force);
   s.indentation = indentation(model, state);
   s.command_seq = applied_seq_;
   s.recoveries = blow_ups_.load(std::memory_order_relaxed);
@@ -485,23 +573,17 @@ void Simulation::publish() {
   s.has_contacts = config_.headless || want_contacts_.load(std::memory_order_relaxed);
   s.positions.clear();
   if (s.has_positions) {
-    const int n = model.particle_count;
+    const int n = shown_->particle_count;
     s.positions.resize(3 * static_cast<size_t>(n));  // within the reserved capacity
     const double* p = state.position.data();
     for (size_t k = 0; k < s.positions.size(); ++k) s.positions[k] = static_cast<float>(p[k]);
   }
   // One copy of 3 n doubles into the preallocated slot (same size: no allocation).
   s.has_body_position = config_.headless || want_derived_.load(std::memory_order_relaxed);
-  if (s.has_body_position) s.body_position = state.position;
+  if (s.has_body_position) s.body_position = state.position.leftCols(shown_->particle_count);
   s.contact_nodes.clear();
   s.contact_forces.clear();
-  if (s.has_contacts) {
-    const size_t m = state.contact_index.size();
-    for (size_t c = 0; c < m; ++c) {
-      s.contact_nodes.push_back(static_cast<uint32_t>(state.contact_index[c]));
-      for (int a = 0; a < 3; ++a) s.contact_forces.push_back(static_cast<float>(state.contact_force(a, c)));
-    }
-  }
+  if (s.has_contacts) show_contacts(s);
   s.publish_ns = now_ns();
   s.deadline_misses = deadline_misses_.load(std::memory_order_relaxed);
   if (haptic_) haptic_->offer_model(render_input_of(s));

@@ -11,6 +11,13 @@
 //    histograms; every publish, and the end of the start (ready or failed), writes
 //    1 to wake_fd() (an eventfd), which the RPC thread watches.
 // Every member below says which thread may touch it.
+//
+// A scene whose cloud follows the tool (core/refocus.h, follows_tool) is stepped on the cloud
+// a FollowingModel keeps refined under the tool: built and shadowed on its worker thread in
+// real time, inline (at SimConfig::refocus.latency, deterministic) when headless. Clients are
+// shown the base mesh (shown_model()): the first particles of every cloud, one topology; the
+// contact forces on the cloud are shared out to the base's vertices (base_weights, the total
+// kept), and the force a frame gives carries the swap's fading offset (docs/physics.md (7.3)).
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
@@ -27,6 +34,7 @@
 #include "core/model.h"
 #include "core/reference_file.h"
 #include "core/options.h"
+#include "core/refocus.h"
 #include "core/scene.h"
 #include "core/state.h"
 #include "server/deadlines.h"
@@ -83,6 +91,9 @@ struct SimConfig {
   // key matches the session's scene is read on the session's thread at its start and
   // given to clients (SessionInfo.reference*). Empty: none looked up.
   std::filesystem::path reference_dir;
+  // How a scene whose cloud follows the tool refocuses (core/refocus.h); latency is the
+  // headless sessions' fixed delay from an ask to the carry.
+  RefocusOptions refocus;
   // The server's RPC thread's heartbeat (server/deadlines.h): a real-time loop granted
   // SCHED_FIFO gives way when it is stale (Deadlines::give_way_to). Null: never.
   const RpcHeartbeat* rpc_heartbeat = nullptr;
@@ -118,6 +129,8 @@ struct SimCounters {
   uint64_t watchdog_rests = 0;  // the loop slept to let other threads run (server/deadlines.h)
   Histogram::Summary step_us, lateness_us;
   HapticCounters haptic;  // multirate only
+  // A scene whose cloud follows the tool: refocuses swapped in, and dropped (core/refocus.h).
+  int64_t refocuses = 0, refocuses_dropped = 0;
 };
 
 struct SimStatus {
@@ -154,7 +167,10 @@ class Simulation {
   const SimConfig& config() const { return config_; }
   // After phase() == ready only (any thread; constant from then on).
   const Scene& scene() const { return scene_; }
-  const Model& model() const { return *model_; }
+  // The model clients are shown (SessionInfo, frames, derived fields): the stepped model, or
+  // for a scene whose cloud follows the tool, the base mesh's (its particles are the first of
+  // every cloud stepped).
+  const Model& shown_model() const { return *shown_; }
   double build_seconds() const { return build_seconds_; }
   // The options the loop started with (the scene's), and the coupling in effect at the
   // start (default_coupling, or the request's clamped): after phase() == ready only.
@@ -210,7 +226,9 @@ class Simulation {
   bool tick_once();
   void recover(const std::string& what);
   void set_position_mode(bool on);
-  void fill_local_models(Snapshot& s) const;
+  void fill_local_models(Snapshot& s, const Vec3& contact_force) const;
+  void take_new_cloud();
+  void show_contacts(Snapshot& s);
   void publish();
   void notify();
 
@@ -221,7 +239,9 @@ class Simulation {
   // Sim thread only until phase ready, then constant and readable by any thread.
   ScenePreparer prepare_;  // sim thread only (run once, then released)
   Scene scene_;
-  std::unique_ptr<Model> model_;
+  std::unique_ptr<Model> model_;                // the model stepped, unless the cloud follows the tool
+  std::unique_ptr<FollowingModel> following_;  // the cloud that follows the tool (else null)
+  const Model* shown_ = nullptr;               // see shown_model()
   double build_seconds_ = 0.0;
   std::optional<Reference> reference_;
   Options initial_options_;
@@ -231,10 +251,23 @@ class Simulation {
   Options options_;  // the scene's (options_of) and the coupling of the mode; the loop steps with them
   bool position_mode_ = false;  // options_.coupling is on (set_position) or off (set_force)
   CouplingOptions coupling_;    // the session's coupling, used in position mode
-  std::unique_ptr<StiffnessSource> stiffness_;  // null when config_.contact_stiffness is false
+  // What the loop keeps for the model it steps (made with it; for a cloud that follows the
+  // tool, one per cloud, made on the refocus worker: core/refocus.h, CloudCompanion).
+  struct Companion {
+    explicit Companion(const State& rest_state) : rest(rest_state), checkpoint(rest_state) {}
+    std::unique_ptr<StiffnessSource> stiffness;  // null when config_.contact_stiffness is false
+    Checkpoint rest, checkpoint;                 // the rest state, the last good state
+  };
+  CloudCompanion make_companion(const Model& model, const State& rest) const;
+  const Model* stepped_ = nullptr;  // the model the loop steps (the following cloud's current one)
+  Companion* companion_ = nullptr;  // stepped_'s
+  CloudCompanion own_companion_;    // companion_ when the cloud does not follow the tool
   std::unique_ptr<State> state_;
   double divergence_bound_ = 0.0;  // m, see diverged() in sim_loop.cpp
-  std::unique_ptr<Checkpoint> rest_, checkpoint_;
+  uint64_t stiffness_evaluations_retired_ = 0;  // by the companions of clouds swapped out
+  std::vector<double> shown_force_;             // 3 x shown particles: show_contacts()' scratch, zero between
+  std::vector<int> shown_touched_;              // its touched base particles (capacity: all)
+  std::vector<unsigned char> shown_marked_;     // 1 for those in shown_touched_
   SnapshotBuffer::Writer frames_writer_;
   bool paused_ = false;
   uint64_t applied_seq_ = 0;
@@ -278,7 +311,8 @@ class Simulation {
   std::atomic<uint64_t> misses_late_start_{0}, misses_long_step_{0}, watchdog_rests_{0};
   std::atomic<uint32_t> blow_ups_{0};
   std::atomic<bool> realtime_priority_{false}, pinned_{false};
-  std::atomic<uint64_t> stiffness_evaluations_{0};  // copied from stiffness_ at each publish
+  std::atomic<uint64_t> stiffness_evaluations_{0};  // copied from the stiffness source at each publish
+  std::atomic<int64_t> refocuses_{0}, refocuses_dropped_{0};
   std::atomic<bool> paused_flag_{false};
   std::atomic<int64_t> status_tick_{0};
   std::atomic<double> status_time_{0.0}, status_force_{0.0};

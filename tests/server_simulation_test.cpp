@@ -84,7 +84,7 @@ TEST(Simulation, TheSceneIsPreparedOnTheSessionsThread) {
   wait_until_started(sim);
   ASSERT_EQ(sim.phase(), Phase::ready);
   EXPECT_NE(prepared_on, std::this_thread::get_id());
-  EXPECT_EQ(sim.model().particle_count, 125);
+  EXPECT_EQ(sim.shown_model().particle_count, 125);
   EXPECT_EQ(sim.scene().source, "<test scene>");
   // The rest state is published before the session is ready.
   ASSERT_TRUE(sim.frames().take());
@@ -267,7 +267,7 @@ TEST(Simulation, DerivedFieldsCopyThePositionsIntoPreallocatedSlots) {
   Simulation sim(config, small_scene());
   wait_until_started(sim);
   ASSERT_EQ(sim.phase(), Phase::ready);
-  const int n = sim.model().particle_count;
+  const int n = sim.shown_model().particle_count;
   auto frames_for = [&](int ms) {
     std::vector<const Snapshot*> seen;
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
