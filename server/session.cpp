@@ -371,6 +371,11 @@ void SessionImpl::on_wake() {
     spdlog::warn("session {}: blow-up #{} at tick {}: {}", id_, frame.recoveries, status.last_blow_up_tick,
                  status.last_blow_up);
   }
+  if (fresh && frame.refocuses_dropped > logged_drops_) {
+    logged_drops_ = frame.refocuses_dropped;
+    spdlog::info("session {}: refocus dropped (#{}): {}", id_, frame.refocuses_dropped,
+                 sim_->status().last_refocus_drop);
+  }
   if (HapticRenderer* haptic = sim_->haptic()) {
     // Multirate: a frame per render tick (its force on the newest step), none per step.
     if (haptic->samples().take()) stream(frame, &haptic->samples().front());

@@ -132,6 +132,7 @@ class SessionImpl final : public wire::Session::Server {
   std::shared_ptr<SessionLink> link_;        // cleared when the session ends
   bool holds_slot_ = true;                   // counted in opener_->sessions_open
   uint32_t logged_blow_ups_ = 0;   // recoveries already logged (on_wake)
+  int64_t logged_drops_ = 0;       // dropped refocuses already logged (on_wake)
   std::unique_ptr<Simulation> sim_;  // declared before the watchers: destroyed after them
   kj::Own<kj::AsyncInputStream> wake_;
   kj::Promise<void> wake_loop_ = nullptr;

@@ -169,6 +169,7 @@ SimStatus Simulation::status() const {
   s.last_blow_up = last_blow_up_;
   s.last_blow_up_tick = last_blow_up_tick_;
   s.error = error_;
+  s.last_refocus_drop = last_refocus_drop_;
   return s;
 }
 
@@ -423,7 +424,11 @@ bool Simulation::tick_once() {
   const int64_t t0 = now_ns();
   if (following_) {
     if (following_->before_step(options_, state)) take_new_cloud();
-    refocuses_dropped_.store(following_->dropped_count(), std::memory_order_relaxed);
+    if (following_->dropped_count() != refocuses_dropped_.load(std::memory_order_relaxed)) {
+      std::lock_guard<std::mutex> lock(text_mutex_);  // rare: a refocus dropped (logged by the RPC thread)
+      last_refocus_drop_ = following_->last_error();
+      refocuses_dropped_.store(following_->dropped_count(), std::memory_order_relaxed);
+    }
   }
   if (config_.before_step_for_tests) config_.before_step_for_tests(state);  // TEST HOOK (empty in the server)
   const Model& model = *stepped_;
@@ -569,6 +574,7 @@ void Simulation::publish() {
   s.indentation = indentation(model, state);
   s.command_seq = applied_seq_;
   s.recoveries = blow_ups_.load(std::memory_order_relaxed);
+  s.refocuses_dropped = refocuses_dropped_.load(std::memory_order_relaxed);
   s.has_positions = config_.headless || want_positions_.load(std::memory_order_relaxed);
   s.has_contacts = config_.headless || want_contacts_.load(std::memory_order_relaxed);
   s.positions.clear();

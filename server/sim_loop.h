@@ -144,6 +144,7 @@ struct SimStatus {
   std::string last_blow_up;
   int64_t last_blow_up_tick = -1;
   std::string error;  // phase == failed
+  std::string last_refocus_drop;  // why the last refocus was dropped (core/refocus.h); empty if none
 };
 
 class Simulation {
@@ -321,7 +322,7 @@ class Simulation {
 
   // Written by the sim thread, read by any thread, under text_mutex_.
   mutable std::mutex text_mutex_;
-  std::string last_blow_up_, error_;
+  std::string last_blow_up_, error_, last_refocus_drop_;
   int64_t last_blow_up_tick_ = -1;
 
   // The owner's thread (constructor, stop()).

@@ -42,6 +42,7 @@ struct Snapshot {
   double indentation = 0.0;            // m
   uint64_t command_seq = 0;
   uint32_t recoveries = 0;
+  int64_t refocuses_dropped = 0;  // a cloud that follows the tool: refocuses dropped so far
   uint64_t deadline_misses = 0;        // the session's so far
   bool has_positions = false;          // positions filled (someone wanted them)
   bool has_contacts = false;
