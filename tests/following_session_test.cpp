@@ -5,9 +5,6 @@
 // it settles to must be the force the fixed cloud refined at the site settles to. The frames
 // show the base mesh whatever the cloud, and the contact forces they show add up to the force
 // on the tool. A real-time session refocuses on its worker thread the same way.
-#include <poll.h>
-#include <unistd.h>
-
 #include <chrono>
 #include <cstdio>
 #include <cmath>
@@ -21,6 +18,7 @@
 #include "core/refocus.h"
 #include "core/scene.h"
 #include "server/sim_loop.h"
+#include "tests/simulation_waits.h"
 
 namespace palpate::server {
 namespace {
@@ -31,26 +29,14 @@ const fs::path kScene = fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_blo
 constexpr double kSiteX = -0.010;  // m: the site, on the top face (z = 0)
 constexpr double kDepth = 0.0015;  // m: the device below the first touch at the site
 
-bool wait_for_wake(const Simulation& sim, int timeout_ms) {
-  pollfd p{sim.wake_fd(), POLLIN, 0};
-  if (poll(&p, 1, timeout_ms) != 1) return false;
-  uint64_t value = 0;
-  return read(sim.wake_fd(), &value, sizeof value) == sizeof value;
-}
+using testing::wait_for_wake;
 
 void wait_until_started(const Simulation& sim) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
-  while (sim.phase() == Phase::starting && std::chrono::steady_clock::now() < deadline) wait_for_wake(sim, 100);
+  testing::wait_until_started(sim, std::chrono::seconds(120));
   ASSERT_EQ(sim.phase(), Phase::ready) << sim.status().error;
 }
 
-const Snapshot& step(Simulation& sim, uint32_t n) {
-  sim.request_steps(n);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(600);
-  while (!sim.take_job_done() && std::chrono::steady_clock::now() < deadline) wait_for_wake(sim, 100);
-  EXPECT_TRUE(sim.frames().take()) << "a job publishes its last frame";
-  return sim.frames().front();
-}
+const Snapshot& step(Simulation& sim, uint32_t n) { return testing::step(sim, n, std::chrono::seconds(600)); }
 
 SimConfig headless() {
   SimConfig c;

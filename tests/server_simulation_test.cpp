@@ -21,6 +21,7 @@
 
 #include "core/scene.h"
 #include "server/sim_loop.h"
+#include "tests/simulation_waits.h"
 
 namespace palpate::server {
 namespace {
@@ -42,28 +43,9 @@ SimConfig headless() {
   return c;
 }
 
-// Waits (bounded) for a write to the wake-up eventfd, and consumes it.
-bool wait_for_wake(const Simulation& sim, int timeout_ms = 20000) {
-  pollfd p{sim.wake_fd(), POLLIN, 0};
-  if (poll(&p, 1, timeout_ms) != 1) return false;
-  uint64_t value = 0;
-  return read(sim.wake_fd(), &value, sizeof value) == sizeof value;
-}
-
-void wait_until_started(const Simulation& sim) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (sim.phase() == Phase::starting && std::chrono::steady_clock::now() < deadline) wait_for_wake(sim, 100);
-  ASSERT_NE(sim.phase(), Phase::starting);
-}
-
-// One headless job of n ticks; the frame it published.
-const Snapshot& step(Simulation& sim, uint32_t n) {
-  sim.request_steps(n);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (!sim.take_job_done() && std::chrono::steady_clock::now() < deadline) wait_for_wake(sim, 100);
-  EXPECT_TRUE(sim.frames().take()) << "a job publishes its last frame";
-  return sim.frames().front();
-}
+using testing::step;
+using testing::wait_for_wake;
+using testing::wait_until_started;
 
 bool finite(const Snapshot& s) {
   bool ok = std::isfinite(s.sim_time) && s.tool_velocity.allFinite() && s.tool_contact_force.allFinite() &&
