@@ -1,14 +1,15 @@
 // A session whose cloud follows the tool (server/sim_loop.h, core/refocus.h), judged against
 // what does not refocus: a session whose cloud was refined at the site from its start. The
-// tool is moved through the air to a site 10 mm from where the session started (so the cloud
-// must refocus to be fine there), pressed into the block in position mode and held: the force
-// it settles to must be the force the fixed cloud refined at the site settles to. The frames
+// tool is moved through the air to a site drawn at random over the palpable face (seeded: no
+// scene or cloud knows it), pressed into the block in position mode and held: the force it
+// settles to must be the force the cloud refined at the site settles to. The frames
 // show the base mesh whatever the cloud, and the contact forces they show add up to the force
 // on the tool. A real-time session refocuses on its worker thread the same way.
 #include <chrono>
 #include <cstdio>
 #include <cmath>
 #include <filesystem>
+#include <random>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -26,7 +27,7 @@ namespace {
 namespace fs = std::filesystem;
 
 const fs::path kScene = fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_block_follow.json";
-constexpr double kSiteX = -0.010;  // m: the site, on the top face (z = 0)
+constexpr double kSiteX = -0.010;  // m: the real-time test's site, on the top face (z = 0)
 constexpr double kDepth = 0.0015;  // m: the device below the first touch at the site
 
 using testing::wait_for_wake;
@@ -57,7 +58,7 @@ struct Held {
 
 // Moves the device through the air from above the start to above the site, lowers it to
 // kDepth below the first touch there and holds it: the last frame.
-Held move_press_hold(const Scene& scene, const SimConfig& config) {
+Held move_press_hold(const Scene& scene, const SimConfig& config, const Vec3& site) {
   Simulation sim(config, scene);
   wait_until_started(sim);
   Held out;
@@ -70,17 +71,19 @@ Held move_press_hold(const Scene& scene, const SimConfig& config) {
     out.finite = out.finite && s.tool_contact_force.allFinite() && s.tool_position.allFinite();
     for (float x : s.positions) out.finite = out.finite && std::isfinite(x);
   };
-  // 400 ms in the air: the device moves at 2.5 cm/s to 2 mm above the site, and waits.
-  for (int k = 1; k <= 400; ++k) {
-    const double a = std::min(1.0, k / 400.0);
-    const Vec3 target(start[0] + a * (kSiteX - start[0]), start[1], touch + 0.002);
+  // In the air at 5 cm/s to 2 mm above the site.
+  const double distance = std::hypot(site[0] - start[0], site[1] - start[1]);
+  const int moving = std::max(1, static_cast<int>(std::ceil(distance / 0.05 / 0.001)));
+  for (int k = 1; k <= moving + 100; ++k) {
+    const double a = std::min(1.0, static_cast<double>(k) / moving);
+    const Vec3 target(start[0] + a * (site[0] - start[0]), start[1] + a * (site[1] - start[1]), touch + 0.002);
     sim.enqueue(CommandType::set_position, target);
     check(step(sim, 1));
   }
   // Down at 1 cm/s to kDepth below the touch, then held for 1.5 s.
   for (int k = 1; k <= 350; ++k) {
     const double z = std::max(touch - kDepth, touch + 0.002 - 0.00001 * k);
-    sim.enqueue(CommandType::set_position, Vec3(kSiteX, start[1], z));
+    sim.enqueue(CommandType::set_position, Vec3(site[0], site[1], z));
     check(step(sim, 1));
   }
   const Snapshot& s = step(sim, 1500);
@@ -98,7 +101,12 @@ Held move_press_hold(const Scene& scene, const SimConfig& config) {
 TEST(FollowingSession, SettlesToTheForceOfACloudRefinedAtTheSite) {
   const Scene following = load_scene(kScene);
   ASSERT_TRUE(follows_tool(following));
-  const Held moved = move_press_hold(following, headless());
+  // A site the scene was not prepared for: uniform over the palpable face (up to 1.5 R from
+  // the side walls), seeded.
+  std::mt19937_64 rng(20261206);
+  std::uniform_real_distribution<double> over_face(-0.035, 0.035);
+  const Vec3 site(over_face(rng), over_face(rng), 0.0);
+  const Held moved = move_press_hold(following, headless(), site);
   ASSERT_TRUE(moved.finite);
   EXPECT_GE(moved.refocuses, 1) << "the cloud refocused toward the site";
   EXPECT_EQ(moved.dropped, 0);
@@ -111,16 +119,20 @@ TEST(FollowingSession, SettlesToTheForceOfACloudRefinedAtTheSite) {
 
   // The truth: the cloud refined at the site from the start (focus given: it never moves).
   Scene fixed = following;
-  fixed.distribution.focus = Vec3(kSiteX, 0.0, 0.0);
+  fixed.distribution.focus = site;
   fixed.distribution.focus_given = true;
   ASSERT_FALSE(follows_tool(fixed));
-  const Held truth = move_press_hold(fixed, headless());
+  const Held truth = move_press_hold(fixed, headless(), site);
   ASSERT_TRUE(truth.finite);
   EXPECT_EQ(truth.refocuses, 0);
   const double error = std::abs(moved.tool_force[2] - truth.tool_force[2]) / std::abs(truth.tool_force[2]);
-  std::printf("refocused %lld times: %.6f N; refined at the site from the start: %.6f N (relative %.1e)\n",
-              static_cast<long long>(moved.refocuses), moved.tool_force[2], truth.tool_force[2], error);
-  EXPECT_LT(error, 1e-3) << "refocused " << moved.tool_force[2] << " N, refined there from the start "
+  std::printf("site (%.2f, %.2f) mm, refocused %lld times: %.6f N; refined at the site from the start: %.6f N "
+              "(relative %.1e)\n",
+              1e3 * site[0], 1e3 * site[1], static_cast<long long>(moved.refocuses), moved.tool_force[2],
+              truth.tool_force[2], error);
+  // The last refocus aims where the tool was heading when it was asked for: its focus may be
+  // up to the refocus distance (0.5 mm) from the site, so the clouds need not be the same.
+  EXPECT_LT(error, 0.01) << "refocused " << moved.tool_force[2] << " N, refined there from the start "
                          << truth.tool_force[2] << " N";
 }
 
