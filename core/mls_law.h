@@ -30,7 +30,8 @@ using hyperelastic::cofactor;
 
 // Differential of the volume term's stress k_v (J - 1) cof F along dF:
 // k_v [(cof F : dF) cof F + (J - 1) d cof F], d cof F from the columns crossed pairwise.
-inline Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volume_stiffness) {
+// Always inlined, as before the refactor: GCC then fuses its products as it did (bit-identical).
+PALPATE_INLINE Mat3 volume_term_differential(const Mat3& F, const Mat3& dF, double volume_stiffness) {
   const Mat3 C = cofactor(F);
   const double J = F.col(0).dot(C.col(0));
   Mat3 dC;
@@ -62,10 +63,12 @@ inline double piola_stress(const Model& m, const Mat3& F, double lambda, double 
   return psi;
 }
 
-// dP of piola_stress at (F, S) along dF, S what piola_stress returned in law_factor_out.
+// dP of piola_stress at (F, S) along dF, S what piola_stress returned in law_factor_out. Not
+// inlined, as before the refactor: GCC then fuses its products as it did, whichever loop calls
+// it (bit-identical; the blocked loops call it only for a block with a lane at det F <= 0).
 template <class Law>
-inline Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, const Mat3& dF, double lambda,
-                               double mu) {
+[[gnu::noinline]] Mat3 piola_differential(const Model& m, const Mat3& F, const Mat3& S, const Mat3& dF,
+                                          double lambda, double mu) {
   Mat3 dP = Law::differential(F, S, dF, lambda, mu);
   fence(dP);
   if (m.volume_stiffness > 0) dP += volume_term_differential(F, dF, m.volume_stiffness);

@@ -62,8 +62,9 @@ inline CorotationalTangent corotational_tangent(const Mat3& F, const Mat3& R) {
   return {U.trace(), K.inverse()};
 }
 
-inline Mat3 corotational_differential(const CorotationalTangent& t, const Mat3& R, const Mat3& dF, double lambda,
-                                      double mu) {
+// Always inlined, as before the refactor: GCC then fuses its products as it did (bit-identical).
+PALPATE_INLINE Mat3 corotational_differential(const CorotationalTangent& t, const Mat3& R, const Mat3& dF,
+                                              double lambda, double mu) {
   const Mat3 A = R.transpose() * dF;
   const Vec3 w = t.K_inverse * Vec3(A(2, 1) - A(1, 2), A(0, 2) - A(2, 0), A(1, 0) - A(0, 1));
   Mat3 W;
@@ -346,7 +347,7 @@ PALPATE_INLINE void weighted_corotational_differentials(const Model& m, const Ma
       dP(r, 1) = two_mu * (dF[q](r, 1) - dR1) + lambda_trace_A * R(r, 1) + lambda_rotation * dR1;
       dP(r, 2) = two_mu * (dF[q](r, 2) - dR2) + lambda_trace_A * R(r, 2) + lambda_rotation * dR2;
     }
-    if constexpr (volume_term) add_volume_term_differential(m, F, dF[q], dP);
+    if constexpr (volume_term) add_volume_term_differential<true>(m, F, dF[q], dP);
     PALPATE_UNROLL
     for (int k = 0; k < 9; ++k) vdP[q].m[k] = v * dP.m[k];
   }

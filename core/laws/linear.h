@@ -31,7 +31,7 @@ PALPATE_INLINE void weighted_linear_stress(const Model& m, const Mat3Lanes& F, c
     PALPATE_UNROLL
     for (int c = r + 1; c < 3; ++c) vP(r, c) = vP(c, r) = v_mu * (F(r, c) + F(c, r));
   }
-  if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
+  if constexpr (volume_term) add_weighted_volume_term_rounded(m, F, v, vP);
 }
 
 // The linear law's v_i dP_i = v_i [mu (dF + dF^T) + lambda tr(dF) I] (+ the volume term's), packed.
@@ -46,7 +46,7 @@ PALPATE_INLINE void weighted_linear_differential(const Model& m, const Mat3Lanes
   const Lanes lambda_trace = lambda * (dF(0, 0) + dF(1, 1) + dF(2, 2));
   PALPATE_UNROLL
   for (int r = 0; r < 3; ++r) dP(r, r) += lambda_trace;
-  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
+  if constexpr (volume_term) add_volume_term_differential<true>(m, F, dF, dP);
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }

@@ -40,10 +40,17 @@ PALPATE_INLINE Lanes log_lanes(const Lanes a) {
 
 // J = det F (through its cofactor C, written) and ln J on the four lanes; false when a
 // lane has J <= 0, where the neo-Hookean law exerts nothing (the per-lane formula handles
-// the block). ln J packed (log_lanes), or lane by lane outside [1e-300, 1e300].
+// the block). ln J packed (log_lanes), or lane by lane outside [1e-300, 1e300]. volume_term:
+// C and J rounded as cofactor_det_lanes<fused> (the pre-refactor loops' rounding next to the
+// volume term, which takes the same C and J).
+template <bool volume_term = false, Fused fused = Fused::first>
 PALPATE_INLINE bool log_det_lanes(const Mat3Lanes& F, Mat3Lanes& C, Lanes& J, Lanes& log_J) {
-  cofactor_lanes(F, C);
-  J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  if constexpr (volume_term) {
+    cofactor_det_lanes<fused>(F, C, J);
+  } else {
+    cofactor_lanes(F, C);
+    J = F(0, 0) * C(0, 0) + F(1, 0) * C(1, 0) + F(2, 0) * C(2, 0);
+  }
   bool packed = true;
   PALPATE_UNROLL
   for (int l = 0; l < kLanes; ++l) {
@@ -67,22 +74,27 @@ PALPATE_INLINE void weighted_neo_hookean_stress(const Model& m, const Mat3Lanes&
                                                 const Lanes mu, Mat3Lanes& vP) {
   Mat3Lanes C;
   Lanes J, log_J;
-  if (!log_det_lanes(F, C, J, log_J)) return weighted_stress_per_lane<NeoHookean>(m, F, v, lambda, mu, vP);
+  if (!log_det_lanes<volume_term, Fused::second>(F, C, J, log_J))
+    return weighted_stress_per_lane<NeoHookean>(m, F, v, lambda, mu, vP);
   const Lanes v_mu = mu * v, scale = v * (lambda * log_J - mu) / J;
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vP.m[k] = v_mu * F.m[k] + scale * C.m[k];
-  if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
+  if constexpr (volume_term) add_weighted_volume_term(m, C, J, v, vP);
 }
 
 // v_i dP_i of the neo-Hookean law (1.15) at (F_i, G_i = F_i^-T) along dF_i, on all four lanes:
 // dP = mu dF + (mu - lambda ln J) G dF^T G + lambda (G : dF) G (+ the volume term's).
-template <bool volume_term>
+// one_direction: the loop's only direction (K = 1); with the volume term, cof F and J then
+// rounded as cofactor_det_lanes<Fused::first> (the pre-refactor K = 1 loop's rounding; with
+// K > 1 GCC's own choice already is the old one).
+template <bool volume_term, bool one_direction = true>
 PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3Lanes& F, const Mat3Lanes& G,
                                                       const Mat3Lanes& dF, const Lanes v, const Lanes lambda,
                                                       const Lanes mu, Mat3Lanes& vdP) {
   Mat3Lanes C;
   Lanes J, log_J;
-  if (!log_det_lanes(F, C, J, log_J)) return weighted_differential_per_lane<NeoHookean>(m, F, G, dF, v, lambda, mu, vdP);
+  if (!log_det_lanes<volume_term && one_direction, Fused::first>(F, C, J, log_J))
+    return weighted_differential_per_lane<NeoHookean>(m, F, G, dF, v, lambda, mu, vdP);
   Mat3Lanes T;  // dF^T G
   PALPATE_UNROLL
   for (int a = 0; a < 3; ++a)
@@ -98,7 +110,7 @@ PALPATE_INLINE void weighted_neo_hookean_differential(const Model& m, const Mat3
     PALPATE_UNROLL
     for (int c = 0; c < 3; ++c)
       dP(r, c) = mu * dF(r, c) + a * (G(r, 0) * T(0, c) + G(r, 1) * T(1, c) + G(r, 2) * T(2, c)) + b * G(r, c);
-  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
+  if constexpr (volume_term) add_volume_term_differential(m, F, C, J, dF, dP);
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
@@ -132,7 +144,8 @@ struct NeoHookean {
                                                     const Mat3Lanes (&dF)[K], const Lanes v, const Lanes lambda,
                                                     const Lanes mu, Mat3Lanes (&vdP)[K]) {
     PALPATE_UNROLL
-    for (int q = 0; q < K; ++q) weighted_neo_hookean_differential<volume_term>(m, F, G, dF[q], v, lambda, mu, vdP[q]);
+    for (int q = 0; q < K; ++q)
+      weighted_neo_hookean_differential<volume_term, K == 1>(m, F, G, dF[q], v, lambda, mu, vdP[q]);
   }
   template <class Gradients>
   static double iteration_flops(const Model&, const Gradients&) { return 0.0; }

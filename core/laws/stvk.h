@@ -36,7 +36,7 @@ PALPATE_INLINE void weighted_stvk_stress(const Model& m, const Mat3Lanes& F, con
   for (int r = 0; r < 3; ++r)
     PALPATE_UNROLL
     for (int c = 0; c < 3; ++c) vP(r, c) = F(r, 0) * vS(0, c) + F(r, 1) * vS(1, c) + F(r, 2) * vS(2, c);
-  if constexpr (volume_term) add_weighted_volume_term(m, F, v, vP);
+  if constexpr (volume_term) add_weighted_volume_term_rounded(m, F, v, vP);
 }
 
 // v_i dP_i, the differential of weighted_stvk_stress at (F_i, S_i) along dF_i:
@@ -65,7 +65,7 @@ PALPATE_INLINE void weighted_stvk_differential(const Model& m, const Mat3Lanes& 
     for (int c = 0; c < 3; ++c)
       dP(r, c) = dF(r, 0) * S(0, c) + dF(r, 1) * S(1, c) + dF(r, 2) * S(2, c) + F(r, 0) * dS(0, c) +
                  F(r, 1) * dS(1, c) + F(r, 2) * dS(2, c);
-  if constexpr (volume_term) add_volume_term_differential(m, F, dF, dP);
+  if constexpr (volume_term) add_volume_term_differential<true>(m, F, dF, dP);
   PALPATE_UNROLL
   for (int k = 0; k < 9; ++k) vdP.m[k] = v * dP.m[k];
 }
