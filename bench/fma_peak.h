@@ -4,7 +4,7 @@
 // latency times the FMA ports (4-5 cycles x 2 ports on current x86), so the loop issues
 // an FMA on every port every cycle. An FMA counts two flops, as the force loops' counts
 // do (core/mls_forces.cpp, mls_internal_forces_flops). Built without AVX2/FMA (option
-// PALPATE_NATIVE off) the peak is not measured (0).
+// PALPATE_ARCH none) the peak is not measured (0).
 #include <algorithm>
 #include <chrono>
 
