@@ -170,6 +170,28 @@ void set_particle_materials(Model& m, const MaterialSpec& material, bool on_latt
   }
 }
 
+// The mass floor (docs/physics.md (1.18)): m_i = max(m_i, beta * mean of m_j over i's
+// neighbours), the means taken over the masses before any is raised (so the result does not
+// depend on the particles' order). Volumes, and so forces and every rest state, are unchanged.
+void apply_mass_floor(Model& m, double beta) {
+  m.mass_floor_raised = 0;
+  m.mass_floor_added = 0.0;
+  if (beta <= 0) return;
+  const std::vector<double> lumped = m.mass;
+  for (int i = 0; i < m.particle_count; ++i) {
+    const int count = m.neighbor_offset[i + 1] - m.neighbor_offset[i];
+    if (count == 0) continue;
+    double sum = 0.0;
+    for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) sum += lumped[m.neighbor_index[a]];
+    const double floor = beta * sum / count;
+    if (lumped[i] < floor) {
+      m.mass[i] = floor;
+      m.mass_floor_added += floor - lumped[i];
+      ++m.mass_floor_raised;
+    }
+  }
+}
+
 // The MLS solid: supports, volumes, moment matrices, gradient weights, hourglass weights.
 void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
   const int n = m.particle_count;
@@ -273,6 +295,7 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
                          scene.distribution.type == DistributionType::grid ||
                              scene.distribution.type == DistributionType::graded_grid,
                          cloud, scene.source);
+  apply_mass_floor(m, scene.mls.mass_floor);
 
   // Moment matrices and gradient weights (A-6 ... A-9, M-14, M-15):
   // A_i = sum_j w_ij x_ij x_ij^T, d_j = A_i^-1 x_ij w_ij.

@@ -32,7 +32,9 @@ struct Model {
   std::vector<double> support_radius;    // n, h_i = alpha * mean neighbour distance, m
 
   // Mass and volume.
-  std::vector<double> mass;              // n, kg
+  std::vector<double> mass;              // n, kg (with the mass floor (1.18) when mls.mass_floor > 0)
+  int mass_floor_raised = 0;             // particles whose mass the floor (1.18) raised
+  double mass_floor_added = 0.0;         // kg, the mass it added (over all particles)
   std::vector<double> inverse_mass;      // n, 1/kg; 0 for fixed particles (projected boundary condition)
   std::vector<double> volume;            // n, v_i, m^3
   std::vector<uint8_t> fixed;            // n, 1 = fixed particle

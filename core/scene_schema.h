@@ -91,7 +91,8 @@ inline constexpr std::string_view kDistributionKeys[] = {"type",          "per_e
                                                   "refine"};
 inline constexpr std::string_view kRefineKeys[] = {"size", "growth", "max_size"};
 inline constexpr std::string_view kMlsKeys[] = {"neighbors",   "max_neighbors", "support_factor", "support_rule",
-                                         "integration", "volumes",       "hourglass",      "regularization"};
+                                         "integration", "volumes",       "hourglass",      "regularization",
+                                         "mass_floor"};
 inline constexpr std::string_view kHexFemKeys[] = {"formulation", "volumetric_integration"};
 inline constexpr std::string_view kMaterialKeys[] = {"young_modulus",    "poisson_ratio", "density",
                                               "volume_stiffness", "law",           "inclusions"};

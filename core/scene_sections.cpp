@@ -133,6 +133,7 @@ void read_mls(const Reader& r, DistributionType distribution, MlsSpec& m) {
   r["volumes"].get(m.volumes, "volume rule", kVolumeRules);
   r["hourglass"].get(m.hourglass, closed(0.0, 100.0));
   r["regularization"].get(m.regularization, closed_open(0.0, 1.0));
+  r["mass_floor"].get(m.mass_floor, closed(0.0, 1.0));
   if (m.volumes == VolumeRule::lattice && distribution == DistributionType::node_file)
     r["volumes"].fail(
         "'lattice' needs a lattice: a node_file cloud has no lattice cell volumes; use 'kernel' "

@@ -118,6 +118,7 @@ struct Mls {
   supportRule @5 :SupportRule = meanDistance $Json.name("support_rule");
   integration @6 :IntegrationRule = nodal;
   maxNeighbors @7 :Int32 = 0 $Json.name("max_neighbors");    # 0 or [neighbors, 128]; 0 = k for every particle
+  massFloor @8 :Float64 = 0 $Json.name("mass_floor");         # [0, 1]: m_i >= this * its neighbours' mean mass; 0 = off
 }
 struct HexFem {
   formulation @0 :HexFormulation = linear;

@@ -145,6 +145,7 @@ const Field kFields[] = {
     SCENE_FIELD("/mls/volumes", mls.volumes, R"("lattice")"),
     SCENE_FIELD("/mls/hourglass", mls.hourglass, "0.5"),
     SCENE_FIELD("/mls/regularization", mls.regularization, "1e-4"),
+    SCENE_FIELD("/mls/mass_floor", mls.mass_floor, "0.5"),
     SCENE_FIELD("/hex_fem/formulation", hex_fem.formulation, R"("corotational")"),
     SCENE_FIELD("/hex_fem/volumetric_integration", hex_fem.volumetric_integration, R"("reduced")"),
     SCENE_FIELD("/material/young_modulus", material.young_modulus, "2e4"),
@@ -199,7 +200,7 @@ const Field kFields[] = {
                                 mesh_file, refine] = s.distribution;
   [[maybe_unused]] const auto& [refine_size, refine_growth, refine_max_size] = s.distribution.refine;
   [[maybe_unused]] const auto& [neighbors, max_neighbors, support_factor, support_rule, integration, volumes, hourglass,
-                                regularization] = s.mls;
+                                regularization, mass_floor] = s.mls;
   [[maybe_unused]] const auto& [formulation, volumetric_integration] = s.hex_fem;
   [[maybe_unused]] const auto& [young_modulus, poisson_ratio, density, volume_stiffness, law, inclusions] = s.material;
   [[maybe_unused]] const auto& [radius, mass, position_given, position, force, workspace_min, workspace_max, guide] =

@@ -185,6 +185,8 @@ nlohmann::json sweep_json(const PreparedSweep& sweep, const std::vector<SweepRow
   out["site"] = {sweep.site_x, sweep.site_y};  // m, the (x, y) of the top face pressed
   out["hertz_radius"] = sweep.hertz_radius;    // m, R, or (3.6) with --surface-radius
   out["total_volume"] = model.total_volume;
+  out["mass_floor_raised"] = model.mass_floor_raised;
+  out["mass_floor_added"] = model.mass_floor_added;  // kg
   out["box_volume"] = model.box_volume;
   out["mesh_tetrahedra"] = model.mesh_tetrahedra;
   out["mesh_unused_nodes"] = model.mesh_unused_nodes;

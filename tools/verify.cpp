@@ -159,6 +159,12 @@ int main(int argc, char** argv) {
                  model.total_volume, model.box_volume, model.integration_residual,
                  model.integration_residual_nodal, to_string(scene.integrator.type), scene.integrator.dt,
                  scene.integrator.damping, site_x, site_y);
+  if (!quiet && model.mass_floor_raised > 0) {
+    double mass = 0.0;
+    for (double m : model.mass) mass += m;
+    std::fprintf(stderr, "palpate-verify: mass floor (mls.mass_floor %g): %d particles raised, %.3g %% of the mass added\n",
+                 scene.mls.mass_floor, model.mass_floor_raised, 100.0 * model.mass_floor_added / (mass - model.mass_floor_added));
+  }
   if (!quiet && model.mesh_tetrahedra > 0)
     std::fprintf(stderr, "palpate-verify: mesh of %lld tetrahedra (%lld unused nodes dropped)\n",
                  static_cast<long long>(model.mesh_tetrahedra), static_cast<long long>(model.mesh_unused_nodes));
