@@ -118,8 +118,8 @@ struct MlsSpec {
   IntegrationRule integration = IntegrationRule::nodal;
   VolumeRule volumes = VolumeRule::kernel;
   double hourglass = 0.0;        // dimensionless hourglass-control stiffness (0 = off)
-  double mass_floor = 0.0;       // beta of (1.18): m_i >= beta * the mean mass of i's neighbours (0 = off)
   double regularization = 1e-6;  // relative eigenvalue floor of the moment matrix
+  double mass_floor = 0.0;       // beta of (1.18): m_i >= beta * the mean mass of i's neighbours (0 = off)
 };
 
 // The hexahedral FEM reference model (model "hex_fem", docs/physics.md §5).
