@@ -2,6 +2,7 @@
 // docs/physics.md §7, (7.3)).
 #include "core/refocus.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -45,7 +46,7 @@ FollowingModel::FollowingModel(const Scene& scene, const std::optional<Vec3>& to
   Options rest_options = options_of(scene_);
   rest_options.integrator.threads = 1;  // the companion's rest state only (the caller's state has the caller's threads)
   current_ = make_cloud(aim_, rest_options, nullptr);
-  expected_delay_ = options.latency;
+  expected_delay_ = std::max(options.latency, options.settle_steps * options_of(scene_).integrator.dt);
   records_.reserve(kMaxRecords);
   if (background_) worker_ = std::thread(&FollowingModel::worker_loop, this);
 }
@@ -77,11 +78,10 @@ std::unique_ptr<FollowingModel::Cloud> FollowingModel::make_cloud(const Vec3& to
   c->build_ms = ms_since(t);
   c->in_base = make_cloud_transfer(base_model_.rest_position, base_cloud_.tetrahedra, c->model.rest_position,
                                    c->cloud.tetrahedra);
-  if (make_companion_ || rest) {
-    auto state = std::make_unique<State>(make_state(c->model, opt));
-    if (make_companion_) c->companion = make_companion_(c->model, *state);
-    if (rest) *rest = std::move(state);
-  }
+  auto state = std::make_unique<State>(make_state(c->model, opt));
+  c->at_ask = std::make_unique<Checkpoint>(*state);  // storage for the state at an ask: saving it allocates nothing
+  if (make_companion_) c->companion = make_companion_(c->model, *state);
+  if (rest) *rest = std::move(state);
   return c;
 }
 
@@ -101,9 +101,17 @@ void FollowingModel::build_next() {
   next_ = std::move(next);
 }
 
+void FollowingModel::save_at_ask(const State& state) {
+  current_->at_ask->save(state);
+  published_.store(0, std::memory_order_relaxed);  // the worker reads the ring only once shadowing
+  save_again_ = false;
+}
+
 void FollowingModel::state_jumped(const std::string& why) {
   offset_tick_ = -1;
   checked_ = false;
+  const int building = phase_.load(std::memory_order_acquire);
+  if (building == kAsked || building == kBuilt) save_again_ = true;  // the replay starts from the jumped state
   int phase = kShadowing;
   if (background_) {
     if (phase_.compare_exchange_strong(phase, kDropping, std::memory_order_acq_rel)) {
@@ -147,42 +155,46 @@ bool FollowingModel::before_step(const Options& opt, State& state) {
     checked_at_ = c;
     checked_ = true;
     if ((refinement_focus(scene_, base_, c) - current_->focus).norm() <= options_.distance) return false;
-    const double delay = expected_delay_ + options_.settle_steps * opt.integrator.dt;
-    aim_ = options_.lead ? Vec3(c + 1.5 * delay * state.indenter_velocity) : c;
+    aim_ = options_.lead ? Vec3(c + 1.5 * expected_delay_ * state.indenter_velocity) : c;
     ask_tick_ = tick;
     shadow_options_ = opt;
     shadow_options_.integrator.threads = 1;
+    save_at_ask(state);  // the shadow will start from this state and replay the tool from here
     if (background_) {
+      phase = kAsked;
       phase_.store(kAsked, std::memory_order_release);
       signal();
-      return false;
+    } else {
+      try {
+        build_next();
+      } catch (const std::exception& e) {
+        drop(e.what());
+        return false;
+      }
+      carry_due_tick_ = tick + std::lround(options_.latency / opt.integrator.dt);
+      phase = kBuilt;
+      phase_.store(kBuilt, std::memory_order_release);
     }
-    try {
-      build_next();
-    } catch (const std::exception& e) {
-      drop(e.what());
-      return false;
-    }
-    carry_due_tick_ = tick + std::lround(options_.latency / opt.integrator.dt);
-    phase_.store(kBuilt, std::memory_order_release);
-    return false;
+  }
+  if (phase == kAsked || phase == kBuilt) {
+    // A state that jumped, or a build longer than the ring: the replay starts again from here.
+    if (save_again_ || published_.load(std::memory_order_relaxed) >= kRing) save_at_ask(state);
   }
   if (phase == kBuilt && (background_ || tick >= carry_due_tick_)) {
-    // Stage 3 begins: the state carried to the new cloud at this tick boundary (7.2).
+    // Stage 3 begins: the state saved at the ask carried to the new cloud (7.2); the shadow
+    // replays the tool from there (the entries published since) and then keeps pace.
     const auto t = std::chrono::steady_clock::now();
-    transfer_state(transfer_, current_->model, state, next_->model, *shadow_);
+    transfer_state(transfer_, current_->model, current_->at_ask->saved(), next_->model, *shadow_);
     carry_ms_ = ms_since(t);
     carry_tick_ = tick;
-    expected_delay_ = (tick - ask_tick_) * opt.integrator.dt;
-    published_.store(0, std::memory_order_relaxed);
     consumed_.store(0, std::memory_order_relaxed);
     phase_.store(kShadowing, std::memory_order_release);
     phase = kShadowing;
   }
-  if (phase != kShadowing) return false;
+  if (phase != kShadowing && phase != kAsked && phase != kBuilt) return false;
   const int64_t published = published_.load(std::memory_order_relaxed);  // written by this thread only
-  const int64_t consumed = consumed_.load(std::memory_order_acquire);
-  if (published >= options_.settle_steps && consumed == published) {
+  const int64_t consumed = phase == kShadowing ? consumed_.load(std::memory_order_acquire) : 0;
+  if (phase == kShadowing && published >= options_.settle_steps && consumed == published) {
     // Stage 4: the shadow has caught up (the worker is idle: it steps only what is published).
     const Vec3 old_force = state.indenter_contact_force, new_force = shadow_->indenter_contact_force;
     copy_tool(state, *shadow_);
@@ -191,6 +203,7 @@ bool FollowingModel::before_step(const Options& opt, State& state) {
     std::swap(state.work.threads.pool, shadow_->work.threads.pool);  // the caller's threads stay the caller's
     offset_ = old_force - new_force;
     offset_tick_ = tick;
+    expected_delay_ = (tick - ask_tick_) * opt.integrator.dt;
     if (records_.size() < kMaxRecords) {
       RefocusRecord r;
       r.ask_tick = ask_tick_;
@@ -214,7 +227,7 @@ bool FollowingModel::before_step(const Options& opt, State& state) {
     phase_.store(kIdle, std::memory_order_release);
     return true;
   }
-  if (published - consumed >= kRing) {
+  if (phase == kShadowing && published - consumed >= kRing) {
     // The worker fell a whole ring behind: the refocus is dropped (asked again later).
     int expected = kShadowing;
     if (phase_.compare_exchange_strong(expected, kDropping, std::memory_order_acq_rel)) {
@@ -225,15 +238,17 @@ bool FollowingModel::before_step(const Options& opt, State& state) {
   }
   ring_[published % kRing] = {state.indenter_center, state.indenter_velocity, state.force_command, state.tool_target};
   published_.store(published + 1, std::memory_order_release);
+  if (phase != kShadowing) return false;  // recorded for the replay
   if (background_) {
     signal();
   } else {
-    if (!step_shadow(ring_[published % kRing])) {
-      drop("the shadow failed a health check: " + describe(shadow_->health.report));
-      phase_.store(kIdle, std::memory_order_release);
-      checked_ = false;
-      return false;
-    }
+    for (int64_t k = consumed; k <= published; ++k)  // the replay since the ask, then this tick's step
+      if (!step_shadow(ring_[k % kRing])) {
+        drop("the shadow failed a health check: " + describe(shadow_->health.report));
+        phase_.store(kIdle, std::memory_order_release);
+        checked_ = false;
+        return false;
+      }
     consumed_.store(published + 1, std::memory_order_release);
   }
   return false;

@@ -11,10 +11,13 @@
 //     swap and the next);
 //  2. build: the refinement, the model, the transfer weights (core/cloud_transfer.h) and the
 //     new cloud's State, on a worker thread (background) or on the caller's (inline);
-//  3. shadow: at a tick boundary the caller's state is carried to the new cloud (7.2), which
-//     is then stepped beside the current one with the current one's tool (its centre,
-//     velocity, command and target before each step), settle_steps steps at least and until it
-//     has caught up with the current one: its transient stays behind it;
+//  3. shadow: the caller's state as it was at the ask (a checkpoint saved then) is carried to
+//     the new cloud (7.2) once it is built, and the new cloud is stepped with the current one's
+//     tool (its centre, velocity, command and target before each step, recorded from the ask
+//     on) through the ticks since the ask, as fast as it can, then beside the current one:
+//     settle_steps steps at least and until it has caught up. Its transient stays behind it,
+//     and the build's time is replayed rather than waited out after it (the swap comes
+//     max(build, settle_steps) after the ask, not their sum);
 //  4. swap: at a tick boundary the shadow's body becomes the caller's state, the tool staying
 //     the current one's; the difference of the contact forces of the two clouds at that
 //     instant is handed out as an offset that fades linearly over fade_steps (7.3), so the
@@ -24,8 +27,9 @@
 // ticks and every number are those of a rerun). Background mode carries as soon as the worker
 // has built and swaps as soon as the shadow has caught up, so its ticks depend on the machine;
 // the caller's thread then only copies the tool into a ring each tick and, once per refocus,
-// carries the state (a sparse product) and swaps pointers: it allocates nothing, and frees
-// nothing (the retired cloud is freed on the worker).
+// saves its state into a checkpoint at the ask (a copy), carries that (a sparse product) and
+// swaps pointers: it allocates nothing, and frees nothing (the retired cloud is freed on the
+// worker).
 #include <atomic>
 #include <cstdint>
 #include <functional>
@@ -35,6 +39,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/checkpoint.h"
 #include "core/cloud_transfer.h"
 #include "core/mesh_reader.h"
 #include "core/model.h"
@@ -51,8 +56,8 @@ struct RefocusOptions {
   int fade_steps = 40;       // steps over which the swap's force offset fades to zero (7.3); 0: none
   bool lead = true;          // aim ahead along the tool's velocity (else at the tool)
   // Inline mode: the time from an ask to the carry, s (the build's wall time it stands for).
-  // Background mode: the carry follows the build; this is only the delay the first ask's aim
-  // expects (later asks expect the last refocus's measured delay).
+  // Background mode: the carry follows the build; this only sets the delay to the swap the
+  // first ask's aim expects (later asks expect the last refocus's measured delay).
   double latency = 0.2;
 };
 
@@ -109,7 +114,7 @@ class FollowingModel {
   // The caller's state jumped (a reset, a recovery to a checkpoint): a refocus already carried
   // is dropped (its shadow follows a state that no longer is; counted in dropped_count() with
   // `why`), and the fading offset of the last swap is cancelled. A cloud being built is kept:
-  // it is carried from the state as it will be then.
+  // the state saved at the ask is saved again at the next call, and the tool recorded from there.
   void state_jumped(const std::string& why);
 
   // Call before each step of model() with `state` (its tool command and target already set
@@ -142,6 +147,7 @@ class FollowingModel {
   struct Cloud {
     NodeCloud cloud;
     Model model;
+    std::unique_ptr<Checkpoint> at_ask;  // the caller's state at the ask of a refocus from this cloud
     Vec3 focus{0, 0, 0};
     double refine_ms = 0, build_ms = 0;
     CloudTransfer in_base;     // see base_weights()
@@ -151,11 +157,14 @@ class FollowingModel {
   struct ToolEntry {
     Vec3 center, velocity, force_command, tool_target;
   };
-  static constexpr int kRing = 1024;  // tool entries the shadow may fall behind
+  // Tool entries the shadow may fall behind (from the ask: a build that takes longer has the
+  // state at the ask saved again, and the replay starts from there).
+  static constexpr int kRing = 1024;
 
   enum Phase : int { kIdle, kAsked, kBuilt, kShadowing, kDropping, kFailed };  // phase_, see worker_loop
 
   std::unique_ptr<Cloud> make_cloud(const Vec3& tool, const Options& opt, std::unique_ptr<State>* rest);
+  void save_at_ask(const State& state);  // the replay starts at this tick
   void build_next();               // stage 2 (worker or inline)
   bool step_shadow(const ToolEntry& entry);  // one shadow step; false: it failed
   void worker_loop();
@@ -179,8 +188,9 @@ class FollowingModel {
   Vec3 aim_{0, 0, 0};
   Vec3 checked_at_{0, 0, 0};       // the tool's centre when the focus under it was last computed
   bool checked_ = false;
-  double expected_delay_ = 0.2;   // s from an ask to the carry (the last build's wall time)
+  double expected_delay_ = 0.2;   // s from an ask to the swap (the last refocus's)
   int64_t ask_tick_ = 0, carry_tick_ = 0, carry_due_tick_ = 0;
+  bool save_again_ = false;        // the state jumped while a cloud was built: save it again
   double carry_ms_ = 0;
   Vec3 offset_{0, 0, 0};
   int64_t offset_tick_ = -1;
@@ -192,7 +202,7 @@ class FollowingModel {
   // Shared with the worker.
   ToolEntry ring_[kRing];
   alignas(64) std::atomic<int> phase_{kIdle};
-  alignas(64) std::atomic<int64_t> published_{0};  // tool entries written since the carry
+  alignas(64) std::atomic<int64_t> published_{0};  // tool entries written since the state was saved
   alignas(64) std::atomic<int64_t> consumed_{0};   // shadow steps done since the carry
   alignas(64) std::atomic<uint32_t> signal_{0};
   std::atomic<bool> stop_{false};

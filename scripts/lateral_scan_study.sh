@@ -12,7 +12,11 @@
 # per site and force), DIR/lateral_scan.md (the tables) and DIR/lateral_scan.png.
 #
 # With --follow the scenes are palpation_lump_follow and palpation_block_follow (their
-# clouds refined in-process at each site, docs/physics.md §7) against the same references.
+# clouds refined in-process at each site, docs/physics.md §7) against the same references,
+# and a third run: palpation_lump_follow without its lump (--set material.inclusions=[]),
+# the tissue without the lump on the lump scene's own cloud (raw name
+# palpation_block_lump_cloud_follow), so that the signal is also the ratio of two runs of one
+# cloud, whose discretisation errors cancel in it, against the references' ratio.
 #
 # usage: scripts/lateral_scan_study.sh [--references] [--follow] [--depth D] [--out DIR] [--raw RAW]
 #   --references  recompute the references at every site (about a minute each)
@@ -56,9 +60,15 @@ study_build palpate-verify palpate-reference
 mkdir -p "$out" "$raw"
 IFS=, read -r -a sites <<< "$sites_list"
 
+# name:scene:physics (the reference's scene) of each run; the --set of a run by its name.
+runs=("palpation_lump$suffix:palpation_lump$suffix:palpation_lump" "palpation_block$suffix:palpation_block$suffix:palpation_block")
+[[ -n $suffix ]] && runs+=("palpation_block_lump_cloud$suffix:palpation_lump$suffix:palpation_block")
+declare -A run_set=([palpation_block_lump_cloud$suffix]="material.inclusions=[]")
 for x in "${sites[@]}"; do
-  for physics in palpation_lump palpation_block; do
-    scene=$physics$suffix
+  for run in "${runs[@]}"; do
+    IFS=: read -r name scene physics <<< "$run"
+    set_args=()
+    [[ -n ${run_set[$name]:-} ]] && set_args=(--set "${run_set[$name]}")
     # The block's reference at the centre is stored already; off-centre ones are computed
     # like the lump's (the key names the site, so verify finds each by itself).
     file="scenes/references/${physics}_site_${x}_0.json"
@@ -69,10 +79,11 @@ for x in "${sites[@]}"; do
       "$reference" --scene "scenes/$physics.json" --site "$x,0" --out "$file" --quiet > /dev/null
       echo "lateral_scan_study.sh: reference of $physics at x = $x: $((SECONDS - start)) s" >&2
     fi
-    echo "lateral_scan_study.sh: palpate-verify --scene scenes/$scene.json --site $x,0" >&2
+    echo "lateral_scan_study.sh: palpate-verify --scene scenes/$scene.json ${set_args[*]} --site $x,0" >&2
     start=$SECONDS
-    "$verify" --scene "scenes/$scene.json" --site "$x,0" --reference "$file" --json --quiet > "$raw/${scene}_$x.json" || true
-    echo "lateral_scan_study.sh: $scene at x = $x: $((SECONDS - start)) s" >&2
+    "$verify" --scene "scenes/$scene.json" "${set_args[@]}" --site "$x,0" --reference "$file" --json --quiet \
+      > "$raw/${name}_$x.json" || true
+    echo "lateral_scan_study.sh: $name at x = $x: $((SECONDS - start)) s" >&2
   done
 done
 

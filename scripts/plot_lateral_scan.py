@@ -87,12 +87,13 @@ def main():
                 "-" if j["l2_error_reference"] is None else "%.2f %%" % (100 * j["l2_error_reference"]),
                 num(f_sim), num(f_ref),
                 "-" if f_sim is None or f_ref is None else "%+.1f %%" % (100 * (f_sim / f_ref - 1))))
-    # The signal: F with the lump / F without it at the fixed depth, simulated against the references'.
+    # The signal: F with the lump / F without it at the fixed depth, simulated against the references',
+    # once for each run without the lump (another scene's cloud, or the lump scene's own cloud).
     lump = next((s for s in scenes if s.startswith("palpation_lump")), None)
-    block = next((s for s in scenes if s.startswith("palpation_block")), None)
-    if lump and block:
-        md += ["", "The signal F(with the lump) / F(without) at d = %g mm, per cent; difference in percentage points."
-               % (1e3 * depth), "", "| x [mm] | simulated | reference | difference |", "|---:|---:|---:|---:|"]
+    for block in (s for s in scenes if s.startswith("palpation_block")) if lump else ():
+        md += ["", "The signal F(with the lump) / F(without) at d = %g mm, per cent, without the lump from %s; "
+               "difference in percentage points." % (1e3 * depth, block), "",
+               "| x [mm] | simulated | reference | difference |", "|---:|---:|---:|---:|"]
         without = {x: (fs, fr) for x, fs, fr in signal[block]}
         for x, fs, fr in signal[lump]:
             if x not in without or None in (fs, fr) + without[x]:
@@ -104,7 +105,8 @@ def main():
     print("\n".join(md))
 
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    style = {"palpation_lump": ("C3", "with the lump"), "palpation_block": ("C0", "without (homogeneous)")}
+    style = {"palpation_lump": ("C3", "with the lump"), "palpation_block": ("C0", "without (homogeneous)"),
+             "palpation_block_lump_cloud": ("C2", "without, on the lump scene's cloud")}
     for scene, points in signal.items():
         colour, label = style.get(scene.replace("_follow", ""), ("C7", scene))
         xs = [1e3 * x for x, _, _ in points]
