@@ -130,6 +130,7 @@ void build_force_blocks(Model& m) {
       const int entry[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
       for (int q = 0; q < 6; ++q) hg.H[q][l] = H(entry[q][0], entry[q][1]);
       for (int c = 0; c < 3; ++c) hg.e_sum[c][l] = e_sum[c];
+      for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) hg.active = hg.active || m.hourglass_weight[a] != 0;
     }
   }
 }
@@ -343,12 +344,18 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
   } else {
     m.integration_residual_nodal = m.integration_residual = integration_residual(m, interior);
   }
-  // Hourglass control: kappa_i = c * 2 mu * v_i / tr(A_i), per neighbour kappa_i w_ij.
+  // Hourglass control: kappa_i = c * 2 mu * v_i / tr(A_i), per neighbour kappa_i w_ij (1.9); on
+  // a cloud refined in-process, only where the support holds a particle the refinement added
+  // (the bisected tetrahedra's vertices: the base mesh's own stencils need none).
   if (scene.mls.hourglass > 0) {
     m.hourglass_weight.resize(nnz);
     m.neighbor_rest_offset.resize(3, nnz);
+    const int base = cloud.refined_from;
     for (int i = 0; i < n; ++i) {
-      const double kappa = scene.mls.hourglass * 2 * m.particle_mu[i] * m.volume[i] / moment_trace[i];
+      bool refined = base == 0 || i >= base;
+      for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1] && !refined; ++a) refined = m.neighbor_index[a] >= base;
+      const double kappa = refined ? scene.mls.hourglass * 2 * m.particle_mu[i] * m.volume[i] / moment_trace[i] : 0.0;
+      m.hourglass_particles += refined;
       for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
         m.hourglass_weight[a] = kappa * weight[a];
         m.neighbor_rest_offset.col(a) = X.col(m.neighbor_index[a]) - X.col(i);

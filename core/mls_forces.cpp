@@ -244,8 +244,17 @@ double mls_internal_forces_flops(const Model& m, const Points& x) {
     if (!m.hourglass_weight.empty()) {
       // Hourglass control (1.9a), per pair: B += x_ij e_ij^T 9 fma 18, s += k x_ij 3 fma 6; in
       // the scatter x_ij 3 sub, k x_ij - F e_ij 3 x (mul + 3 fma) = 21: 48. Per particle: F H
-      // 9 x (mul + 2 fma) = 45, T += F H - B 18; s - F e_i 3 x (mul + 3 fma) = 21: 84.
-      return nnz * (39.0 + 51.0) + n * (per_particle + 84.0) + polar;
+      // 9 x (mul + 2 fma) = 45, T += F H - B 18; s - F e_i 3 x (mul + 3 fma) = 21: 84. Only in
+      // the blocks that have it (the loop skips the others).
+      double hg_pairs = 0, hg_particles = 0;
+      for (size_t b = 0; b < m.blocks.size(); ++b)
+        if (m.block_hourglass[b].active)
+          for (int l = 0; l < kLanes && kLanes * static_cast<int>(b) + l < m.particle_count; ++l) {
+            const int i = kLanes * static_cast<int>(b) + l;
+            hg_pairs += m.neighbor_offset[i + 1] - m.neighbor_offset[i];
+            hg_particles += 1;
+          }
+      return nnz * 39.0 + hg_pairs * 51.0 + n * per_particle + hg_particles * 84.0 + polar;
     }
     return nnz * 39.0 + n * per_particle + polar;
   }

@@ -367,10 +367,26 @@ template <class Law, class Layout, bool volume_term, bool hourglass>
 void internal_forces_blocked(const Model& m, int b_begin, int b_end, const double* __restrict x,
                              double* __restrict f) {
   static_assert(Law::group == 1 || Law::group == 2, "the blocked loop groups one or two blocks");
+  // Blocks without hourglass control (a refined cloud's far part) take the loop without its terms.
+  [[maybe_unused]] auto active = [&](int b) { return m.block_hourglass[b].active; };
   int b = b_begin;
   if constexpr (Law::group == 2)
-    for (; b + 2 <= b_end; b += 2) internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 2>(m, b, x, f);
-  for (; b < b_end; ++b) internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 1>(m, b, x, f);
+    for (; b + 2 <= b_end; b += 2) {
+      if constexpr (hourglass)
+        if (!active(b) && !active(b + 1)) {
+          internal_forces_of_blocks<Law, Layout, volume_term, false, 2>(m, b, x, f);
+          continue;
+        }
+      internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 2>(m, b, x, f);
+    }
+  for (; b < b_end; ++b) {
+    if constexpr (hourglass)
+      if (!active(b)) {
+        internal_forces_of_blocks<Law, Layout, volume_term, false, 1>(m, b, x, f);
+        continue;
+      }
+    internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 1>(m, b, x, f);
+  }
 }
 
 // The force differentials df_q = (df/dx) dx_q for K directions in one sweep over blocks
@@ -383,6 +399,11 @@ void force_differentials_blocked(const Model& m, int b_begin, int b_end, const d
                                  const double* tangent_law_factor, const double* const* dx, double* const* df) {
   const int n = m.particle_count;
   for (int b = b_begin; b < b_end; ++b) {
+    if constexpr (hourglass)
+      if (!m.block_hourglass[b].active) {  // a block without hourglass control: the loop without its terms
+        force_differentials_blocked<Law, Layout, volume_term, false, K>(m, b, b + 1, tangent_F, tangent_law_factor, dx, df);
+        continue;
+      }
     const Block& block = m.blocks[b];
     const Slot* begin = m.block_slots.data() + block.slot_begin;
     const Slot* end = m.block_slots.data() + block.slot_end;

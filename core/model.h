@@ -62,8 +62,11 @@ struct Model {
   std::vector<ParticleBlock> blocks;      // ceil(n / 4)
   std::vector<NeighborSlot> block_slots;  // sum over blocks of the longest neighbour list
 
-  // Hourglass control (empty when the scene's mls.hourglass == 0).
+  // Hourglass control (empty when the scene's mls.hourglass == 0). On a cloud refined in-process
+  // only the particles whose support holds a particle the refinement added have it (kappa_i = 0
+  // elsewhere: docs/physics.md (1.9)); hourglass_particles counts those that do.
   std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
+  int hourglass_particles = 0;
   Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)
   // Its blocked copy (docs/physics.md (1.9a)), parallel to block_slots and blocks; padding
   // slots and lanes hold zeros. Per slot k_ij = kappa_i w_ij and e_ij = k_ij X_ij; per
@@ -75,6 +78,7 @@ struct Model {
   struct HourglassBlock {
     alignas(32) double H[6][block_width];  // H_i entries (0,0), (1,1), (2,2), (0,1), (0,2), (1,2), N m
     double e_sum[3][block_width];          // e_i, N
+    bool active = false;                   // a lane has hourglass control (else the loops skip its terms)
   };
   std::vector<HourglassSlot> block_hourglass_slots;  // as block_slots (hourglass only)
   std::vector<HourglassBlock> block_hourglass;       // as blocks (hourglass only)

@@ -245,7 +245,9 @@ NodeCloud refined_mesh_cloud(const Scene& scene, const TetMesh& base, const Vec3
   spec.growth = d.refine.growth;
   if (d.refine.max_size > 0) spec.max_size = d.refine.max_size;
   try {
-    return mesh_cloud(refine_mesh(base, spec));
+    NodeCloud cloud = mesh_cloud(refine_mesh(base, spec));
+    cloud.refined_from = static_cast<int>(base.positions.cols());
+    return cloud;
   } catch (const std::invalid_argument& e) {
     throw SceneError(scene.source, "/body/distribution/refine/size", e.what());
   }

@@ -35,6 +35,9 @@ struct NodeCloud {
   };
   std::vector<VolumeGroup> volume_groups;            // the mesh's named physical volumes ($PhysicalNames)
   std::vector<std::array<int, 3>> boundary_triangles;  // the mesh's boundary faces, outward (mesh_reader.h)
+  // A cloud refined in-process (refined_mesh_cloud): particles [0, refined_from) are the base
+  // mesh's vertices, the others the refinement's; 0 for any other cloud.
+  int refined_from = 0;
 };
 
 // Regular lattice with `per_axis` nodes along each box axis, corners included.

@@ -6,8 +6,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
 
 #include "analysis/rest.h"
+#include "core/mesh_reader.h"
 #include "core/mls_forces.h"
 #include "core/node_cloud.h"
 #include "test_util.h"
@@ -146,6 +148,57 @@ TEST(MassFloor, KeepsTheRestDepthAndBringsTheFocusVertexToRest) {
   EXPECT_LT(corner_on.steps, 2000);
   const PressResult corner_off = press(0.035, -0.035, 0.0, 3.0);  // the control: the same press without it
   EXPECT_FALSE(corner_off.at_rest) << "came to rest in " << corner_off.steps << " steps without the floor";
+}
+
+// Hourglass control on a cloud refined in-process (docs/physics.md (1.9)): kappa_i only where the
+// support holds a particle the refinement added, checked against the base mesh's vertex count
+// read from its file; and the blocked loops, which skip the blocks without it, give the
+// per-particle reference loops' forces and force differentials.
+TEST(HourglassWhereRefined, OnlyNearTheRefinementAndTheBlockedLoopsMatchTheReference) {
+  const test::Setup s = at_site(0.0175, 0.0, 0.5);
+  const Model& m = s.model;
+  const int n = m.particle_count;
+  const int base = static_cast<int>(read_mesh(s.scene.distribution.mesh_file).positions.cols());
+  ASSERT_GT(n, base);
+  int with = 0;
+  for (int i = 0; i < n; ++i) {
+    bool near = i >= base, has = false;
+    for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
+      near = near || m.neighbor_index[a] >= base;
+      has = has || m.hourglass_weight[a] != 0;
+    }
+    ASSERT_EQ(has, near) << "particle " << i;
+    with += has;
+  }
+  EXPECT_EQ(with, m.hourglass_particles);
+  EXPECT_GT(with, n / 4);
+  EXPECT_LT(with, n - n / 4);  // on this cloud about half the particles have none
+  int skipped = 0;
+  for (const auto& block : m.block_hourglass) skipped += !block.active;
+  EXPECT_GT(skipped, 0) << "no block without hourglass control: the loops skip nothing";
+
+  Model reference = m;
+  reference.blocks.clear();
+  ASSERT_TRUE(detail::uses_blocked_loops(m));
+  ASSERT_FALSE(detail::uses_blocked_loops(reference));
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1e-4, 1e-4);  // m: a tenth of the finest spacing
+  Points x = m.rest_position, dx(3, n);
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) {
+      if (!m.fixed[i]) x(c, i) += u(rng);
+      dx(c, i) = u(rng);
+    }
+  Points f(3, n), f_reference(3, n);
+  mls_internal_forces(m, x, f);
+  mls_internal_forces(reference, x, f_reference);
+  EXPECT_LT((f - f_reference).cwiseAbs().maxCoeff(), 1e-12 * f_reference.cwiseAbs().maxCoeff());
+  std::vector<double> F, S;
+  mls_linearize(m, x, F, S);
+  Points df(3, n), df_reference(3, n);
+  mls_force_differential(m, F, S, dx, df);
+  mls_force_differential(reference, F, S, dx, df_reference);
+  EXPECT_LT((df - df_reference).cwiseAbs().maxCoeff(), 1e-12 * df_reference.cwiseAbs().maxCoeff());
 }
 
 }  // namespace mass_floor
