@@ -126,11 +126,11 @@ void build_force_blocks(Model& m) {
         Model::HourglassSlot& slot = m.block_hourglass_slots[block.slot_begin + (a - m.neighbor_offset[i])];
         slot.k[l] = k;
         for (int c = 0; c < 3; ++c) slot.e[c][l] = k * X_ij[c];
+        hg.active = hg.active || k != 0;
       }
       const int entry[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
       for (int q = 0; q < 6; ++q) hg.H[q][l] = H(entry[q][0], entry[q][1]);
       for (int c = 0; c < 3; ++c) hg.e_sum[c][l] = e_sum[c];
-      for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) hg.active = hg.active || m.hourglass_weight[a] != 0;
     }
   }
 }
@@ -355,7 +355,6 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
       bool refined = base == 0 || i >= base;
       for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1] && !refined; ++a) refined = m.neighbor_index[a] >= base;
       const double kappa = refined ? scene.mls.hourglass * 2 * m.particle_mu[i] * m.volume[i] / moment_trace[i] : 0.0;
-      m.hourglass_particles += refined;
       for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
         m.hourglass_weight[a] = kappa * weight[a];
         m.neighbor_rest_offset.col(a) = X.col(m.neighbor_index[a]) - X.col(i);

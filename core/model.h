@@ -64,9 +64,8 @@ struct Model {
 
   // Hourglass control (empty when the scene's mls.hourglass == 0). On a cloud refined in-process
   // only the particles whose support holds a particle the refinement added have it (kappa_i = 0
-  // elsewhere: docs/physics.md (1.9)); hourglass_particles counts those that do.
+  // elsewhere: docs/physics.md (1.9)).
   std::vector<double> hourglass_weight;  // nnz, kappa_i * w_ij, N/m
-  int hourglass_particles = 0;
   Points neighbor_rest_offset;           // 3 x nnz, X_ij = X_j - X_i (hourglass only)
   // Its blocked copy (docs/physics.md (1.9a)), parallel to block_slots and blocks; padding
   // slots and lanes hold zeros. Per slot k_ij = kappa_i w_ij and e_ij = k_ij X_ij; per

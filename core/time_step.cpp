@@ -57,14 +57,6 @@ double envelope_constant(const Model& model, IntegratorType integrator) {
   return stability_constant(model.solid, integrator, model.distribution);
 }
 
-}  // namespace
-
-double stable_time_step(const Model& model, IntegratorType integrator) {
-  return envelope_constant(model, integrator) * model.min_spacing / envelope_wave_speed(model);
-}
-
-namespace {
-
 // The largest eigenvalue of the Lanczos tridiagonal matrix (diagonal alpha, off-diagonal
 // beta[0 .. m-2]) and its residual bound beta[m-1] |y_m|: ||A v - theta v|| of its Ritz vector.
 struct RitzPair {
@@ -85,6 +77,10 @@ constexpr int kMinSteps = 20;         // Lanczos steps before convergence is loo
 constexpr double kConverged = 1e-6;  // residual bound / Ritz value that ends the iteration
 
 }  // namespace
+
+double stable_time_step(const Model& model, IntegratorType integrator) {
+  return envelope_constant(model, integrator) * model.min_spacing / envelope_wave_speed(model);
+}
 
 double spectral_time_step(const Model& model, IntegratorType integrator) {
   if (model.solid != SolidKind::mls || integrator == IntegratorType::implicit_euler) return 0.0;

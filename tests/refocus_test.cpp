@@ -62,6 +62,16 @@ const State& pressed_start() {
   return pressed;
 }
 
+// The scene's options for a slide: the tool on a free guide, dragged by the virtual coupling
+// (100 N/m, critically damped for the tool's mass).
+Options sliding_options(const Options& opt) {
+  Options sliding = opt;
+  sliding.tool_guide = ToolGuide::free;
+  sliding.coupling.stiffness = 100;
+  sliding.coupling.damping = 2.0 * std::sqrt(100 * opt.indenter_mass);
+  return sliding;
+}
+
 // Slides the pressed tool `steps` steps at kSpeed from (-10, 0) mm, the cloud following it.
 // background: the worker builds and shadows, and the loop waits after each step until the
 // worker has built and stepped the shadow up to it (lockstep: the same numbers as inline with
@@ -72,10 +82,7 @@ Slide slide(long steps, const RefocusOptions& refocus, bool background) {
   FollowingModel follow(scene, scene.indenter.position, refocus, background);
   State state = pressed_start();
   EXPECT_EQ(state.position.cols(), follow.model().particle_count);
-  Options sliding = opt;
-  sliding.tool_guide = ToolGuide::free;
-  sliding.coupling.stiffness = 100;
-  sliding.coupling.damping = 2.0 * std::sqrt(100 * opt.indenter_mass);
+  const Options sliding = sliding_options(opt);
   reset_health(follow.model(), sliding, state);
   const Vec3 start = state.indenter_center;
   Slide out;
@@ -184,10 +191,7 @@ double swap_offset_after_a_jump(bool tell) {
   o.settle_steps = 30;  // short enough that a shadow of the abandoned slide has not settled by the swap
   FollowingModel follow(scene, scene.indenter.position, o, false);
   State state = pressed_start();
-  Options sliding = opt;
-  sliding.tool_guide = ToolGuide::free;
-  sliding.coupling.stiffness = 100;
-  sliding.coupling.damping = 2.0 * std::sqrt(100 * opt.indenter_mass);
+  const Options sliding = sliding_options(opt);
   reset_health(follow.model(), sliding, state);
   const Checkpoint start(state);
   const Vec3 start_tool = state.indenter_center;
