@@ -11,6 +11,7 @@
 #include "core/hex_fem.h"
 #include "core/model.h"
 #include "core/node_cloud.h"
+#include "core/surface.h"
 #include "analysis/held_tool_static.h"
 #include "analysis/static_contact.h"
 
@@ -66,11 +67,21 @@ void place_indenter_at_site(Scene& scene, double x, double y, const std::string&
   scene.indenter.position = Vec3(x, y, scene.box.max[2] + scene.indenter.radius);
   check_site(scene, field);
   // Just touching: the height at which the sphere over (x, y) first meets a particle of the
-  // undeformed cloud (the cloud is built with the site, so a graded lattice is graded toward it).
-  const double first_contact = first_contact_height(make_node_cloud(scene).positions, scene.indenter.radius, x, y);
-  if (!std::isfinite(first_contact))
-    throw std::invalid_argument(field + ": no particle of the body lies under the indenter at the site");
-  scene.indenter.position[2] = first_contact;
+  // undeformed cloud. The cloud is built with the site (a graded lattice graded toward it), and
+  // a cloud that follows the tool is refined toward the point of the surface nearest the
+  // tool's centre, which depends on the height: so the height is the fixed point of "refine
+  // toward the tool, then touch". A body without a box starts with the tool over its top.
+  if (!scene.box_given) {
+    const Points X = make_node_cloud(scene).positions;
+    scene.indenter.position[2] = X.row(2).maxCoeff() + scene.indenter.radius;
+  }
+  for (int pass = 0; pass < 8; ++pass) {
+    const double first_contact = first_contact_height(make_node_cloud(scene).positions, scene.indenter.radius, x, y);
+    if (!std::isfinite(first_contact))
+      throw std::invalid_argument(field + ": no particle of the body lies under the indenter at the site");
+    if (first_contact == scene.indenter.position[2]) break;
+    scene.indenter.position[2] = first_contact;
+  }
 }
 
 double first_contact_height(const Points& X, double R, double x, double y) {
@@ -85,6 +96,11 @@ double first_contact_height(const Points& X, double R, double x, double y) {
 double touch_height_at(const Model& model, double x, double y) {
   const Points& X = model.rest_position;
   const double R = model.indenter_radius;
+  // With a surface: the sphere's first contact with its triangles (2.16), as build_model
+  // measures model.touch_height; on a sloping face (the dome's flank) the particle formula
+  // below would put the sphere's bottom, not its side, on the highest particle.
+  const double surface_contact = sphere_first_contact_height(X, model.surface_triangles, x, y, R);
+  if (std::isfinite(surface_contact)) return surface_contact;
   double surface = -INFINITY;
   for (Eigen::Index i = 0; i < X.cols(); ++i) {
     const double r2 = (X(0, i) - x) * (X(0, i) - x) + (X(1, i) - y) * (X(1, i) - y);

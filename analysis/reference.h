@@ -47,9 +47,11 @@ void place_indenter_at_site(Scene& scene, double x, double y, const std::string&
 // of the points X (3 x n); -inf when none lies within R horizontally.
 double first_contact_height(const Points& X, double R, double x, double y);
 
-// The touch height z_touch of (2.5) over (x, y), (4.1): R + the height of the highest particle
-// of the reference configuration within horizontal distance R. Computed from the body,
-// so a face that is not flat or a cloud without a node under the site is measured as is.
+// The touch height z_touch of (2.5) over (x, y): the height of the sphere's centre when it
+// first touches the reference configuration's surface triangles (2.16), as build_model
+// measures model.touch_height; for a cloud without a surface (4.1), R + the height of the
+// highest particle within horizontal distance R. Computed from the body, so a face that is
+// not flat or a cloud without a node under the site is measured as is.
 double touch_height_at(const Model& model, double x, double y);
 
 // The indentation under the tool's actual (x, y) (docs/physics.md (2.5)):

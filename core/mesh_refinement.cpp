@@ -37,6 +37,18 @@ class Refiner {
       for (int v : g.nodes) member[v] = 1;
       in_group_.push_back(std::move(member));
     }
+    // The surface's normals at its vertices, (7.1a): each boundary face's outward normal, listed
+    // at each of its vertices with Max's weight (e1 x e2) / (|e1|^2 |e2|^2) (e1, e2 the face's
+    // edges from that vertex), whose sum is the exact normal at a vertex of a mesh inscribed in
+    // a sphere however irregular the facets (N. Max, J. Graphics Tools 4(2), 1999).
+    surface_normals_.resize(n);
+    const auto faces = base.boundary_faces.empty() ? tetrahedra_boundary_faces(base.positions, base.tetrahedra)
+                                                   : base.boundary_faces;
+    for (const auto& f : faces)
+      for (int k = 0; k < 3; ++k) {
+        const Vec3 e1 = x_[f[(k + 1) % 3]] - x_[f[k]], e2 = x_[f[(k + 2) % 3]] - x_[f[k]];
+        surface_normals_[f[k]].push_back(e1.cross(e2) / (e1.squaredNorm() * e2.squaredNorm()));
+      }
     edge_tets_.reserve(8 * tets_.size());
     for (int t = 0; t < static_cast<int>(tets_.size()); ++t) add_edges(t);
   }
@@ -152,9 +164,22 @@ class Refiner {
     for (int s : around)
       for (int v : tets_[s])
         if (v != a && v != b) third.push_back(v);
+    std::vector<Vec3> face_normals;  // the outward unit normals of the boundary faces around e
+    for (int s : around) {
+      const auto& v = tets_[s];
+      int c[2], k = 0;
+      for (int u : v)
+        if (u != a && u != b) c[k++] = u;
+      for (int j = 0; j < 2; ++j)
+        if (std::count(third.begin(), third.end(), c[j]) == 1) {
+          Vec3 normal = (x_[b] - x_[a]).cross(x_[c[j]] - x_[a]);
+          if (normal.dot(x_[c[1 - j]] - x_[a]) > 0) normal = -normal;  // away from the tetrahedron's fourth vertex
+          face_normals.push_back(normal.normalized());
+        }
+    }
     std::sort(third.begin(), third.end());
     const int m = static_cast<int>(x_.size());
-    x_.push_back(0.5 * (x_[a] + x_[b]));
+    x_.push_back(boundary_midpoint(a, b, face_normals, around));
     for (auto& member : in_group_) {
       bool in = false;
       if (member[a] && member[b])
@@ -180,8 +205,55 @@ class Refiner {
     edge_tets_.erase(e);
   }
 
+  // The unit normal of the surface at boundary vertex v on the side whose faces' normal is
+  // `side`: its listed normals within the crease angle of `side`, summed (side when none is).
+  Vec3 smooth_normal(int v, const Vec3& side) const {
+    Vec3 sum = Vec3::Zero();
+    for (const Vec3& w : surface_normals_[v])
+      if (w.dot(side) >= kCreaseCosine * w.norm()) sum += w;
+    return sum.squaredNorm() > 0 ? Vec3(sum.normalized()) : side;
+  }
+
+  // The new vertex on edge (a, b), (7.1a): the midpoint, or on a boundary edge inside a smooth
+  // surface (its two faces' normals within the crease angle) the midpoint of the cubic Hermite
+  // curve from a to b whose tangents lie in the surface's tangent planes at a and b, so that a
+  // curved body's new surface vertices lie on the curved surface and not on its facets (on a
+  // sphere of radius R_b the offset is |b - a|^2 / (8 R_b) along the normal, the facet's sag;
+  // on a flat face it is zero). Records the new vertex's surface normals for later cuts. The
+  // offset is dropped if it would turn a child tetrahedron inside out.
+  Vec3 boundary_midpoint(int a, int b, const std::vector<Vec3>& face_normals, const std::vector<int>& around) {
+    const Vec3 mid = 0.5 * (x_[a] + x_[b]);
+    surface_normals_.emplace_back();
+    if (face_normals.size() != 2) return mid;  // interior (or a non-manifold edge: left straight)
+    const Vec3 &f1 = face_normals[0], &f2 = face_normals[1];
+    std::vector<Vec3>& normals = surface_normals_.back();
+    if (f1.dot(f2) < kCreaseCosine) {  // a crease (a box's edge, the dome's rim): straight, a normal per side
+      normals = {(smooth_normal(a, f1) + smooth_normal(b, f1)).normalized(),
+                 (smooth_normal(a, f2) + smooth_normal(b, f2)).normalized()};
+      return mid;
+    }
+    const Vec3 side = (f1 + f2).normalized();
+    const Vec3 na = smooth_normal(a, side), nb = smooth_normal(b, side);
+    normals = {(na + nb).normalized()};
+    const Vec3 ab = x_[b] - x_[a];
+    const Vec3 offset = (ab.dot(nb) * nb - ab.dot(na) * na) / 8.0;  // (P'(0) - P'(1)) / 8 of the Hermite curve
+    if (offset.squaredNorm() == 0) return mid;
+    const Vec3 curved = mid + offset;
+    for (int s : around)  // each child replaces b (or a) by the new vertex: both must stay positive
+      for (int replaced : {a, b}) {
+        std::array<int, 4> t = tets_[s];
+        Vec3 p[4];
+        for (int k = 0; k < 4; ++k) p[k] = t[k] == replaced ? curved : x_[t[k]];
+        if ((p[1] - p[0]).dot((p[2] - p[0]).cross(p[3] - p[0])) <= 0) return mid;
+      }
+    return curved;
+  }
+
+  static constexpr double kCreaseCosine = 0.8660254037844387;  // cos 30 degrees
+
   const MeshRefinement& spec_;
   std::vector<Vec3> x_;
+  std::vector<std::vector<Vec3>> surface_normals_;  // per vertex: weighted outward normals (none inside)
   std::vector<std::array<int, 4>> tets_;
   std::vector<int64_t> region_;
   std::vector<std::vector<uint8_t>> in_group_;  // per surface group, per vertex

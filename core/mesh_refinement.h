@@ -17,12 +17,14 @@
 // vertices' indices), never on the order of earlier refinements: refocusing always starts
 // from the base.
 //
-// Each new vertex is an edge midpoint: on the boundary when its edge is, and in a physical
-// surface group when both ends are and a boundary triangle of the group contains the edge.
-// Children keep their parent's region tag. Nodal volumes, boundary faces and the total
-// volume are recomputed as the reader computes them (mesh_reader.h); bisection keeps the
-// total volume exactly (up to round-off) and the boundary surface (a curved body keeps the
-// base's facets).
+// Each new vertex is an edge midpoint, except on a boundary edge inside a smooth curved
+// surface, where it is the middle of the Hermite curve the surface's normals at the edge's
+// ends define (7.1a), so that a curved body's new surface vertices lie on the curved surface
+// rather than on the base's facets. It is on the boundary when its edge is, and in a
+// physical surface group when both ends are and a boundary triangle of the group contains
+// the edge. Children keep their parent's region tag. Nodal volumes, boundary faces and the
+// total volume are recomputed as the reader computes them (mesh_reader.h); on a body of flat
+// faces bisection keeps the total volume exactly (up to round-off).
 #include <cmath>
 
 #include "core/mesh_reader.h"

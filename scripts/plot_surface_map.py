@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """The map of the depth error over the palpable surface (scripts/surface_map_study.sh).
 
-usage: plot_surface_map.py CSV SCENE PNG [--target PERCENT]
+usage: plot_surface_map.py CSV SCENE PNG [--target PERCENT] [--dome RB]
 
 Reads CSV (one row per site, written by surface_map_study.sh: x_m, y_m, err_<F>N per force,
 worst_abs_err, l2_err, ...) and the scene (its box, indenter radius and, for a mesh cloud, the
@@ -13,6 +13,8 @@ mesh file) and draws PNG:
          nearest top-face neighbours, contoured) with the top-face nodes as dots;
   right  the signed error at the smallest and the largest verification force against the
          site's distance from the centre of the face, the target band shaded.
+With --dome RB (a hemisphere of radius RB, m, no box): the rim and the circles where the skin
+slopes by 15, 30 and 45 degrees instead of the walls; distances from the pole.
 """
 import csv
 import json
@@ -26,7 +28,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import TwoSlopeNorm  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
+from matplotlib.patches import Circle, Rectangle  # noqa: E402
 
 
 def read_msh_nodes(path):
@@ -70,6 +72,11 @@ def main():
         k = args.index("--target")
         target = float(args[k + 1])
         del args[k:k + 2]
+    dome = None
+    if "--dome" in args:
+        k = args.index("--dome")
+        dome = float(args[k + 1])
+        del args[k:k + 2]
     if len(args) != 3:
         sys.exit(__doc__)
     csv_file, scene_file, png = args
@@ -84,13 +91,16 @@ def main():
     worst = np.array([num(r["worst_abs_err"]) for r in rows]) * 100
     ref_unc = np.array([num(r.get("ref_uncertainty_max")) for r in rows]) * 100
     err = np.array([[num(r[c]) for c in force_cols] for r in rows]) * 100
-    box = scene["body"]["box"]
     R = scene["indenter"]["radius"] * mm
-    lo, hi = np.array(box["min"][:2]) * mm, np.array(box["max"][:2]) * mm
-    centre = 0.5 * (lo + hi)
     ux, uy = np.unique(np.round(x, 9)), np.unique(np.round(y, 9))
     steps = [s for s in np.concatenate([np.diff(ux), np.diff(uy)]) if s > 1e-9]
     cell = min(steps) if steps else 2 * R
+    if dome is not None:
+        lo, hi = -np.array([dome, dome]) * mm, np.array([dome, dome]) * mm
+    else:
+        box = scene["body"]["box"]
+        lo, hi = np.array(box["min"][:2]) * mm, np.array(box["max"][:2]) * mm
+    centre = 0.5 * (lo + hi)
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(14.5, 6.6), gridspec_kw={"width_ratios": [1.12, 1]})
     vmax = max(np.nanmax(worst), 2 * target)
@@ -108,11 +118,20 @@ def main():
         if math.isfinite(u):
             ax.text(xi, yi - 0.22 * cell, "ref ±%.1f" % u, ha="center", va="center", fontsize=7.5,
                     color="black" if light else "white", zorder=4, bbox=box)
-    ax.add_patch(Rectangle(lo, *(hi - lo), fill=False, edgecolor="black", lw=2, zorder=3))
-    m = 1.5 * R
-    ax.add_patch(Rectangle(lo + m, *(hi - lo - 2 * m), fill=False, edgecolor="black", lw=1, ls="--", zorder=3))
-    handles = [plt.Line2D([], [], color="black", lw=2, label="top face (walls)"),
-               plt.Line2D([], [], color="black", lw=1, ls="--", label="palpable surface: 1.5 R from the walls (the sites: cell centres)")]
+    if dome is not None:
+        ax.add_patch(Circle((0, 0), dome * mm, fill=False, edgecolor="black", lw=2, zorder=3))
+        for degrees in (15, 30, 45):
+            ax.add_patch(Circle((0, 0), dome * mm * math.sin(math.radians(degrees)), fill=False, edgecolor="black",
+                                lw=0.8, ls="--", zorder=3))
+        handles = [plt.Line2D([], [], color="black", lw=2, label="the dome's rim (fixed base)"),
+                   plt.Line2D([], [], color="black", lw=0.8, ls="--", label="where the skin slopes by 15, 30, 45° (the sites: cell centres)")]
+    else:
+        ax.add_patch(Rectangle(lo, *(hi - lo), fill=False, edgecolor="black", lw=2, zorder=3))
+        m = 1.5 * R
+        ax.add_patch(Rectangle(lo + m, *(hi - lo - 2 * m), fill=False, edgecolor="black", lw=1, ls="--", zorder=3))
+        handles = [plt.Line2D([], [], color="black", lw=2, label="top face (walls)"),
+                   plt.Line2D([], [], color="black", lw=1, ls="--",
+                              label="palpable surface: 1.5 R from the walls (the sites: cell centres)")]
     spacing = top_face_spacing(scene_file, scene)
     note = ""
     if spacing is not None:
@@ -184,7 +203,7 @@ def main():
         mean = [np.nanmean(e[np.isclose(r, d, atol=1e-6)]) for d in d_unique]
         ax2.plot(d_unique, mean, color=colour, lw=1.2, alpha=0.7,
                  label="F = %g N, mean over the sites at that distance" % forces[k])
-    ax2.set_xlabel("distance of the site from the centre of the top face (mm)")
+    ax2.set_xlabel("horizontal distance of the site from the %s (mm)" % ("pole" if dome else "centre of the top face"))
     ax2.set_ylabel("error in depth against the reference at the site (%)")
     ax2.set_title("Signed error at the smallest and the largest verification force", fontsize=11)
     ax2.grid(alpha=0.3)

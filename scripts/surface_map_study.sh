@@ -30,6 +30,25 @@
 # makes the map reproducible from the repository alone and a re-run cheap (~1 min: the presses
 # only).
 #
+# A dome (--dome RB: a scene whose body is the hemisphere of `scripts/make_mesh.sh --dome RB`
+# centred at the origin, no box): the grid is the square |x|, |y| <= A (--half-width, default
+# RB / 2: the corners 45 degrees down the flank), and each site is pressed along the skin's
+# normal there, as a finger palpates: the body is rotated about the origin so that the site is
+# its top (scripts/lib/rotate_to_top.py: a rotated copy of the scene's mesh, the inclusions'
+# centres rotated with it, the fixed base group moving with its nodes) and pressed straight
+# down at (0, 0). (Pressed straight down, the flank would also be pushed along its slope, and a
+# linear reference with vertical gaps is then another problem: 20 % apart at 45 degrees.) The
+# reference at a site is palpate-reference --tet-meshes (linear tetrahedra, exact static
+# solve, Richardson in the size at the site) on gmsh meshes of the hemisphere refined toward
+# the site's point of the skin, rotated the same way, self-similar in s (--tet-levels,
+# default 0.5 0.397 0.315; as scripts/dome_study.sh: focus 1 mm x s, skin 3 mm x s, far
+# 8 mm x s, growth 1 + 0.25 s, each spherical inclusion a ball of its radius / 6 x s).
+# Symmetry (--symmetric, the default when every inclusion is a sphere on the axis x = y = 0):
+# the hemisphere fixed on its base is mapped onto itself by every rotation about its axis, so
+# the reference at (x, y) is the one at (sqrt(x^2 + y^2), 0) ("rotated"): the 25 sites of the
+# 5 x 5 grid need 6. Each takes 4-6 min of one core and up to 9 GB at s = 0.315 with a lump,
+# about 14 min and 20 GB with s = 0.25 as well (then --jobs 1).
+#
 # Time: 50-100 s per new reference (one core each, --jobs at a time), ~2 s per pressed site.
 # palpation_block from scratch on a 2-core machine (nice -n 10): 3 min 54 s (the 5 references
 # in 192 s on 2 jobs, the 25 presses in 39 s); again with the cache: 49 s. Without --symmetric
@@ -60,6 +79,10 @@
 #   --sites LIST      explicit sites instead of the grid, 'X,Y X,Y ...' (m)
 #   --cache DIR       the references' cache (default RAW/references)
 #   --references      recompute the references into the cache even when one is found
+#   --dome RB         the body is the hemisphere of radius RB (m) of make_mesh.sh --dome
+#   --half-width A    with --dome: the grid's half-width (m; default RB / 2)
+#   --tet-levels LIST with --dome: the reference meshes' scale factors s, coarse to fine
+#                     (default '0.5 0.397 0.315'; at least three)
 # Paths are relative to the repository root.
 # shellcheck source=SCRIPTDIR/lib/study_common.sh
 source "$(dirname "$0")/lib/study_common.sh"
@@ -74,6 +97,9 @@ per_axis=5
 sites_list=
 references=0
 cache=
+dome=
+half_width=
+tet_levels="0.5 0.397 0.315"
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --build) build=${2:?--build needs a folder}; shift ;;
@@ -87,6 +113,9 @@ while [[ $# -gt 0 ]]; do
     --sites) sites_list=${2:?--sites needs a list}; shift ;;
     --cache) cache=${2:?--cache needs a folder}; shift ;;
     --references) references=1 ;;
+    --dome) dome=${2:?--dome needs a radius}; shift ;;
+    --half-width) half_width=${2:?--half-width needs a length}; shift ;;
+    --tet-levels) tet_levels=${2:?--tet-levels needs a list}; shift ;;
     -h|--help) study_help ;;
     *) study_unknown_option "$1" ;;
   esac
@@ -99,7 +128,7 @@ verify="$build/bin/palpate-verify"
 reference="$build/bin/palpate-reference"
 study_require "$verify" "$reference"  # this script compiles nothing
 name=$(basename "$scene" .json)
-[[ -z $symmetric ]] && { [[ $name == palpation_block ]] && symmetric=1 || symmetric=0; }
+[[ -z $symmetric && -z $dome ]] && { [[ $name == palpation_block ]] && symmetric=1 || symmetric=0; }
 # The runs' JSON (data/README.md): under data/ for an output under docs/, else DIR/raw.
 [[ -n $raw ]] || { [[ $out == docs/* ]] && raw=data/${out#docs/} || raw=$out/raw; }
 cache=${cache:-$raw/references}
@@ -111,15 +140,38 @@ trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$tmp"' EXIT
 # The sites, and per site its octant site under the symmetry (itself without it). The grid
 # is the top face less 1.5 R from every side wall; coordinates are printed with %.10g so
 # that a site's text is the same everywhere (file names, --site, the reference's key).
-"$python" - "$scene" "$symmetric" "$per_axis" "$sites_list" > "$tmp/sites.txt" <<'PY'
-import json, sys
-scene_file, symmetric, per_axis, sites_list = sys.argv[1], sys.argv[2] == "1", int(sys.argv[3]), sys.argv[4]
+"$python" - "$scene" "$symmetric" "$per_axis" "$sites_list" "$dome" "$half_width" > "$tmp/sites.txt" <<'PY'
+import json, math, sys
+scene_file, symmetric, per_axis, sites_list, dome, half_width = sys.argv[1:7]
+per_axis = int(per_axis)
 scene = json.load(open(scene_file))
 box = scene.get("body", {}).get("box")
+t = lambda v: "%.10g" % (0.0 if abs(v) < 1e-15 else v)
+if dome:
+    if box is not None:
+        sys.exit("surface_map_study.sh: --dome, but %s has a body.box" % scene_file)
+    RB = float(dome)
+    a = float(half_width) if half_width else 0.5 * RB
+    inclusions = scene.get("material", {}).get("inclusions", [])
+    on_axis = all("sphere" in i and abs(i["sphere"]["center"][0]) < 1e-12 and abs(i["sphere"]["center"][1]) < 1e-12
+                  for i in inclusions)
+    if symmetric == "1" and not on_axis:
+        sys.exit("surface_map_study.sh: --symmetric, but an inclusion is not a sphere on the axis: use --no-symmetric")
+    axisymmetric = on_axis if symmetric == "" else symmetric == "1"
+    if sites_list:
+        sites = [tuple(float(v) for v in s.split(",")) for s in sites_list.split()]
+    else:
+        axis = [-a + 2 * a * k / max(per_axis - 1, 1) for k in range(per_axis)] if per_axis > 1 else [0.0]
+        sites = [(x, y) for y in axis for x in axis]
+    for x, y in sites:
+        if math.hypot(x, y) > RB - scene["indenter"]["radius"]:
+            sys.exit("surface_map_study.sh: the site (%g, %g) is within R of the dome's rim" % (x, y))
+        ox, oy = (math.hypot(x, y), 0.0) if axisymmetric else (x, y)
+        print(t(x), t(y), t(ox), t(oy))
+    sys.exit(0)
 if box is None:
     sys.exit("surface_map_study.sh: %s has no body.box: palpate-reference --site computes the finite *block*'s "
-             "reference; a curved body (the dome) needs palpate-reference --tet-meshes on meshes refined at each "
-             "site, which this script does not do (palpate-verify --site itself places the tool on such a body)" %
+             "reference; for a hemisphere give --dome RB (references on tetrahedral meshes refined at each site)" %
              scene_file)
 lo, hi, R = box["min"], box["max"], scene["indenter"]["radius"]
 cx, cy = 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])
@@ -132,7 +184,6 @@ if symmetric:
         why.append("its fixed regions are not whole faces (bottom, sides)")
     if why:
         sys.exit("surface_map_study.sh: --symmetric, but " + " and ".join(why) + ": use --no-symmetric")
-t = lambda v: "%.10g" % (0.0 if abs(v) < 1e-15 else v)
 if sites_list:
     sites = [tuple(float(v) for v in s.split(",")) for s in sites_list.split()]
 else:
@@ -149,13 +200,49 @@ for x, y in sites:
     print(t(x), t(y), t(ox), t(oy))
 PY
 
-# key X Y: the reference key palpate-verify expects at a site (palpate-reference on a tiny
-# lattice, a tenth of a second; it also refuses a site off the face or closer than R to a wall).
+# site_args X Y: sets `args`, what puts the tool at site (X, Y): --site X,Y; on a dome, the
+# scene's mesh and inclusions rotated so that the site is the top, and --site 0,0 (made once
+# per site into $tmp, read back by the background jobs).
+if [[ -n $dome ]]; then
+  base_mesh=$("$python" -c 'import json, os, sys; s = json.load(open(sys.argv[1]))
+print(os.path.join(os.path.dirname(sys.argv[1]), s["body"]["distribution"]["file"]))' "$scene")
+fi
+skin_z() { awk -v r="$dome" -v x="$1" -v y="$2" 'BEGIN { printf "%.10g", sqrt(r * r - x * x - y * y) }'; }
+site_args() {
+  local x=$1 y=$2 file="$tmp/site_${1}_${2}.args"
+  if [[ ! -f $file ]]; then
+    if [[ -z $dome ]]; then
+      printf '%s\n' --site "$x,$y" > "$file"
+    else
+      local z mesh inclusions
+      z=$(skin_z "$x" "$y")
+      mesh="$tmp/$(basename "$base_mesh" .msh)_site_${x}_${y}.msh"
+      "$python" scripts/lib/rotate_to_top.py mesh "$base_mesh" "$mesh" "$x" "$y" "$z"
+      inclusions=$("$python" - "$scene" "$x" "$y" "$z" <<'PY'
+import json, sys
+sys.path.insert(0, "scripts/lib")
+from rotate_to_top import apply, rotation
+Q = rotation([float(v) for v in sys.argv[2:5]])
+inclusions = json.load(open(sys.argv[1])).get("material", {}).get("inclusions", [])
+for i in inclusions:
+    if "box" in i:
+        sys.exit("surface_map_study.sh: --dome: a box inclusion does not rotate into a box")
+    if "sphere" in i:
+        i["sphere"]["center"] = [float("%.12g" % v) for v in apply(Q, i["sphere"]["center"])]
+print(json.dumps(inclusions))
+PY
+)
+      printf '%s\n' --set "body.distribution.file=$mesh" --set "material.inclusions=$inclusions" --site 0,0 > "$file"
+    fi
+  fi
+  mapfile -t args < "$file"
+}
+# key X Y: the reference key palpate-verify expects at a site (palpate-reference --key; it
+# also refuses a site off the face or closer than R to a wall).
 key() {
-  local j
-  j=$("$reference" --scene "$scene" --site "$1,$2" --levels 5,6,7 --json --quiet) ||
+  site_args "$1" "$2"
+  "$reference" --scene "$scene" "${args[@]}" --key ||
     { echo "surface_map_study.sh: no reference key at ($1, $2) (palpate-reference refused the site)" >&2; exit 2; }
-  "$python" -c 'import json, sys; print(json.load(sys.stdin)["key"])' <<< "$j"
 }
 # The stored and cached references by key.
 index_references() {
@@ -192,9 +279,46 @@ done < "$tmp/sites.txt"
 
 # throttle: wait until fewer than --jobs background jobs run.
 throttle() { while (( $(jobs -rp | wc -l) >= jobs )); do wait -n || true; done; }
+# tet_meshes X Y: with --dome, the gmsh family refined toward the site's point of the skin and
+# rotated as site_args rotates the scene's mesh (into $tmp), printed as palpate-reference
+# --tet-meshes wants it.
+tet_meshes() {
+  local x=$1 y=$2 s list=() z
+  z=$(skin_z "$x" "$y")
+  for s in $tet_levels; do
+    local file="$tmp/tet_${x}_${y}_$s.msh" refine=()
+    while read -r cx cy cz rad; do
+      refine+=(--refine "$cx" "$cy" "$cz" "$rad" "$(awk -v r="$rad" -v s="$s" 'BEGIN { print r / 6 * s }')")
+    done < "$tmp/inclusions.txt"
+    scripts/make_mesh.sh --dome "$dome" --focus "$x" "$y" "$z" \
+      --focus-size "$(awk -v s="$s" 'BEGIN { print 0.001 * s }')" --growth "$(awk -v s="$s" 'BEGIN { print 1 + 0.25 * s }')" \
+      --top-size "$(awk -v s="$s" 'BEGIN { print 0.003 * s }')" --far-size "$(awk -v s="$s" 'BEGIN { print 0.008 * s }')" \
+      "${refine[@]}" --out "$file.unrotated" >&2 || return 1
+    "$python" scripts/lib/rotate_to_top.py mesh "$file.unrotated" "$file" "$x" "$y" "$z" || return 1
+    rm -f "$file.unrotated"
+    list+=("$file:$(awk -v s="$s" 'BEGIN { print 0.001 * s }')")
+  done
+  (IFS=,; echo "${list[*]}")
+}
+if [[ -n $dome ]]; then
+  (( $(wc -w <<< "$tet_levels") >= 3 )) || { echo "surface_map_study.sh: --tet-levels: at least three" >&2; exit 2; }
+  "$python" - "$scene" > "$tmp/inclusions.txt" <<'PY'
+import json, sys
+for i in json.load(open(sys.argv[1])).get("material", {}).get("inclusions", []):
+    if "sphere" not in i:
+        sys.exit("surface_map_study.sh: --dome: only spherical inclusions get a refined ball in the reference meshes")
+    print(*i["sphere"]["center"], i["sphere"]["radius"])
+PY
+fi
 compute_reference() {
-  local x=$1 y=$2 file=$3 start=$SECONDS
-  if "$reference" --scene "$scene" --site "$x,$y" --out "$file.part" > "$tmp/ref_${x}_${y}.log" 2>&1; then
+  local x=$1 y=$2 file=$3 start=$SECONDS family=() args
+  site_args "$x" "$y"
+  if [[ -n $dome ]]; then
+    family=(--tet-meshes "$(tet_meshes "$x" "$y" 2> "$tmp/mesh_${x}_${y}.log")") ||
+      { echo "surface_map_study.sh: the reference meshes at ($x, $y) FAILED:" >&2; cat "$tmp/mesh_${x}_${y}.log" >&2; return; }
+  fi
+  if "$reference" --scene "$scene" "${args[@]}" "${family[@]}" --out "$file.part" > "$tmp/ref_${x}_${y}.log" 2>&1; then
+    rm -f "$tmp"/tet_"${x}"_"${y}"_*.msh
     mv "$file.part" "$file"
     echo "surface_map_study.sh: reference at ($x, $y): $((SECONDS - start)) s" >&2
   else
@@ -233,9 +357,10 @@ PY
 }
 
 press() {
-  local x=$1 y=$2 ref=$3 rc=0
+  local x=$1 y=$2 ref=$3 rc=0 args
   local json="$raw/sites/${name}_${x}_${y}.json"
-  "$verify" --scene "$scene" --site "$x,$y" --reference "$ref" --json --quiet > "$json.part" 2> "$tmp/verify_${x}_${y}.log" || rc=$?
+  site_args "$x" "$y"
+  "$verify" --scene "$scene" "${args[@]}" --reference "$ref" --json --quiet > "$json.part" 2> "$tmp/verify_${x}_${y}.log" || rc=$?
   if [[ $rc == 0 || $rc == 3 ]]; then  # 3: some force did not come to rest (its row says so)
     mv "$json.part" "$json"
   else
@@ -258,9 +383,9 @@ wait
 echo "surface_map_study.sh: $(wc -l < "$tmp/pressed.txt") sites pressed in $((SECONDS - start_all)) s" >&2
 
 # The tables.
-"$python" - "$out" "$name" "$tmp/pressed.txt" "$raw" <<'PY'
+"$python" - "$out" "$name" "$tmp/pressed.txt" "$raw" "$([[ -n $dome ]] && echo rotated || echo mirrored)" <<'PY'
 import json, math, os, sys
-out, name, pressed, raw = sys.argv[1:5]
+out, name, pressed, raw, moved = sys.argv[1:6]
 sites = [line.split() for line in open(pressed)]
 rows, long_rows, forces = [], [], None
 missing = []
@@ -308,9 +433,9 @@ ok1 = [s for s in rows if s["worst"] is not None and s["worst"] <= 0.01]
 worst = max(rows, key=lambda s: -1 if s["worst"] is None else s["worst"])
 md = ["Depth error of `%s` against the converged reference at each site, per cent, at F = %s N; worst = the "
       "largest |error| over the forces; L2 = ||d_sim − d_ref|| / ||d_ref|| over the sweep; ref ± = the "
-      "reference's largest relative uncertainty; reference: the octant site whose reference was used "
-      "(mirrored when it is not the site itself). Written by scripts/surface_map_study.sh." %
-      (name, ", ".join("%g" % F for F in forces)), "",
+      "reference's largest relative uncertainty; reference: the site whose reference was used "
+      "(%s when it is not the site itself). Written by scripts/surface_map_study.sh." %
+      (name, ", ".join("%g" % F for F in forces), moved), "",
       "| x (mm) | y (mm) | " + " | ".join("%g N" % F for F in forces) + " | worst | L2 | ref ± | reference |",
       "|---:|---:|" + "---:|" * len(forces) + "---:|---:|---:|---|"]
 for s in sorted(rows, key=lambda s: (-s["y"], s["x"])):
@@ -320,7 +445,7 @@ for s in sorted(rows, key=lambda s: (-s["y"], s["x"])):
         1000 * s["x"], 1000 * s["y"], " | ".join(pc(e) for e in s["err"]), w,
         "–" if s["l2"] is None else "%.1f" % (100 * s["l2"]),
         "–" if s["unc"] is None else "%.1f" % (100 * s["unc"]),
-        "(%g, %g)%s%s" % (1000 * s["octant"][0], 1000 * s["octant"][1], " mirrored" if s["mirrored"] else "",
+        "(%g, %g)%s%s" % (1000 * s["octant"][0], 1000 * s["octant"][1], " " + moved if s["mirrored"] else "",
                           "" if s["status"] == "ok" else ", " + s["status"])))
 md += ["", "%d of %d sites within 2 %% at every force, %d within 1 %%; the worst: (%g, %g) mm, %.1f %%." % (
     len(ok2), len(rows), len(ok1), 1000 * worst["x"], 1000 * worst["y"], 100 * (worst["worst"] or float("nan")))]
@@ -330,4 +455,4 @@ open(os.path.join(out, name + ".md"), "w").write("\n".join(md) + "\n")
 print("\n".join(md))
 PY
 
-"$python" scripts/plot_surface_map.py "$out/$name.csv" "$scene" "$out/$name.png"
+"$python" scripts/plot_surface_map.py "$out/$name.csv" "$scene" "$out/$name.png" ${dome:+--dome "$dome"}

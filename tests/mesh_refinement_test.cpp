@@ -9,9 +9,11 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <random>
 #include <sstream>
+#include <unistd.h>
 
 #include "analysis/reference.h"
 #include "analysis/rest.h"
@@ -185,6 +187,51 @@ TEST(MeshRefinement, MidpointsJoinTheSurfaceGroupsOfTheirFaces) {
     for (int v : f) EXPECT_TRUE(grouped[v]) << "boundary vertex " << v << " in no group";
 }
 
+TEST(MeshRefinement, NewSurfaceVerticesLieOnTheCurvedSurfaceNotOnItsFacets) {
+  // The dome's coarse base (skin facets about 3 mm on a sphere of radius 5 cm) refined to 1 mm
+  // toward a point of its flank: a new vertex of the skin on the facet's chord would sit up to
+  // a facet's sag, h^2 / (8 R_b), inside the sphere; on the Hermite curve of (7.2) it is on the
+  // sphere to fourth order in h. The truth is the sphere |x| = R_b the base was meshed on.
+  const double RB = 0.05;
+  const TetMesh base = read_mesh(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "meshes" / "palpation_dome_base.msh");
+  const auto skin = std::find_if(base.surface_groups.begin(), base.surface_groups.end(),
+                                 [](const SurfaceGroup& g) { return g.name == "skin"; });
+  ASSERT_NE(skin, base.surface_groups.end());
+  double base_error = 0, sag = 0;  // the base's own vertices, and its largest facet's sag
+  for (int v : skin->nodes) base_error = std::max(base_error, std::abs(base.positions.col(v).norm() - RB));
+  for (const auto& f : base.boundary_faces)
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 a = base.positions.col(f[k]), b = base.positions.col(f[(k + 1) % 3]);
+      if (a[2] > 0 && b[2] > 0) sag = std::max(sag, (b - a).squaredNorm() / (8 * RB));
+    }
+  ASSERT_GT(sag, 1e-5);
+  MeshRefinement spec;
+  spec.focus = Vec3(0.02, 0.01, std::sqrt(RB * RB - 0.02 * 0.02 - 0.01 * 0.01));
+  spec.focus_size = 0.001;
+  spec.growth = 1.2;
+  const TetMesh fine = refine_mesh(base, spec);
+  const int n0 = static_cast<int>(base.positions.cols());
+  int new_skin = 0;
+  double worst = 0;
+  for (const auto& g : fine.surface_groups) {
+    if (g.name != "skin") continue;
+    for (int v : g.nodes)
+      if (v >= n0 && fine.positions(2, v) > 0) {  // (the rim's midpoints stay on the base plane: a crease)
+        ++new_skin;
+        worst = std::max(worst, std::abs(fine.positions.col(v).norm() - RB));
+      }
+  }
+  ASSERT_GT(new_skin, 50);
+  std::printf("new skin vertices %d: off the sphere by at most %.3g m (the base %.3g m, its largest sag %.3g m)\n", new_skin, worst, base_error, sag);
+  EXPECT_LT(worst, base_error + 0.01 * sag) << new_skin << " new skin vertices; the base's largest sag " << sag;
+  // Still a valid mesh: every tetrahedron positive, the volume between the base's (its facets)
+  // and the hemisphere's.
+  for (const auto& t : fine.tetrahedra) EXPECT_GT(tet_volume(fine.positions, t), 0.0);
+  const double hemisphere = 2.0 / 3.0 * M_PI * RB * RB * RB;
+  EXPECT_GT(fine.total_volume, base.total_volume);
+  EXPECT_LT(fine.total_volume, hemisphere);
+}
+
 TEST(MeshRefinement, RefusesWhatCannotBeMeant) {
   MeshRefinement spec = spec_at(0, 0);
   spec.focus_size = 0;
@@ -271,6 +318,87 @@ TEST(MeshRefinement, AnUnanticipatedSiteIsOnItsReference) {
     EXPECT_NEAR(d, d_ref, 0.035 * d_ref) << "site (" << x << ", " << y << "), " << F << " N: "
                                          << 100 * (d - d_ref) / d_ref << " %";
   }
+}
+
+}  // namespace
+}  // namespace palpate
+
+namespace palpate {
+namespace {
+
+// `in` (gmsh 4.1 ASCII, non-parametric nodes) with every node moved by Q, written to `out`.
+void write_rotated_mesh(const fs::path& in, const fs::path& out, const Mat3& Q) {
+  std::ifstream file(in);
+  std::ofstream rotated(out);
+  rotated.precision(17);
+  std::string line;
+  auto copy = [&] {
+    if (!std::getline(file, line)) throw std::runtime_error(in.string() + ": ends early");
+    rotated << line << "\n";
+  };
+  while (std::getline(file, line) && line != "$Nodes") rotated << line << "\n";
+  rotated << line << "\n";
+  copy();
+  std::istringstream header(line);
+  int blocks = 0;
+  header >> blocks;
+  for (int b = 0; b < blocks; ++b) {
+    copy();
+    std::istringstream block(line);
+    int dim = 0, tag = 0, parametric = 0, n = 0;
+    block >> dim >> tag >> parametric >> n;
+    ASSERT_EQ(parametric, 0);
+    for (int k = 0; k < n; ++k) copy();  // the node tags
+    for (int k = 0; k < n; ++k) {
+      std::getline(file, line);
+      std::istringstream xyz(line);
+      Vec3 x;
+      xyz >> x[0] >> x[1] >> x[2];
+      const Vec3 y = Q * x;
+      rotated << y[0] << " " << y[1] << " " << y[2] << "\n";
+    }
+  }
+  while (std::getline(file, line)) rotated << line << "\n";
+}
+
+// The dome's version of the test above, on its surface map (scripts/surface_map_study.sh
+// --dome): a site drawn (seeded) from the map's 25, the dome rotated about its centre so that
+// the site is its top (pressed along the skin's normal, as the map presses it; the lump turns
+// with it), its cloud refined there by the scene itself, against the converged reference of
+// the dome rotated to that site's polar angle (data/verification/surface_map/references; the
+// hemisphere fixed on its base and its lump on the axis are the same problem at every azimuth).
+TEST(MeshRefinement, AnUnanticipatedSiteOfTheDomeIsOnItsReference) {
+  std::mt19937 draw(32);
+  const double grid[5] = {-0.025, -0.0125, 0.0, 0.0125, 0.025};
+  const double x = grid[draw() % 5], y = grid[draw() % 5], RB = 0.05;
+  const Vec3 site(x, y, std::sqrt(RB * RB - x * x - y * y));
+  const Mat3 Q = Eigen::Quaterniond::FromTwoVectors(site.normalized(), Vec3::UnitZ()).toRotationMatrix();
+  const fs::path dir = fs::temp_directory_path() / ("palpate_dome_site_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  write_rotated_mesh(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "meshes" / "palpation_dome_base.msh",
+                     dir / "palpation_dome_base.msh", Q);
+  Scene scene = load_scene(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_dome_follow.json",
+                           {{"body.distribution.file", "\"" + (dir / "palpation_dome_base.msh").string() + "\""}});
+  for (InclusionSpec& inclusion : scene.material.inclusions) inclusion.center = Q * inclusion.center;
+  place_indenter_at_site(scene, 0.0, 0.0);
+  std::ostringstream r;  // as the study names it (%.10g)
+  r.precision(10);
+  r << std::hypot(x, y);
+  const Reference reference = load_reference(fs::path(PALPATE_SOURCE_DIR) / "data" / "verification" / "surface_map" /
+                                             "references" / ("palpation_dome_follow_site_" + r.str() + "_0.json"));
+  const Model model = build_model(scene);
+  Options opt = options_of(scene);
+  opt.tool_guide = ToolGuide::vertical;
+  State state = make_state(model, opt);
+  for (double F : {0.05, 0.262}) {
+    const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, F);
+    ASSERT_TRUE(press.at_rest) << "site (" << x << ", " << y << "), " << F << " N";
+    const double d = indentation_at_tool(model, state), d_ref = reference_indentation(reference, F);
+    std::printf("dome site (%g, %g) mm, %g N: %+.2f %%\n", 1e3 * x, 1e3 * y, F, 100 * (d - d_ref) / d_ref);
+    EXPECT_NEAR(d, d_ref, 0.035 * d_ref) << "site (" << x << ", " << y << "), " << F << " N: "
+                                         << 100 * (d - d_ref) / d_ref << " %";
+  }
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -53,6 +53,8 @@ const char* kUsage = R"(usage: palpate-reference --scene FILE [options]
   --set KEY=VALUE       override a scene field (repeatable)
   --out FILE            write the reference as JSON (what palpate-verify --reference reads)
   --json                print the reference as JSON on stdout
+  --key                 print only the key the reference would have (the scene's body,
+                        material, fixed regions, tool radius and site) and exit; computes nothing
   --quiet               no progress on stderr
   --log-level LEVEL     spdlog level (default: warn; debug: the held solve's Newton steps)
 )";
@@ -66,7 +68,7 @@ int main(int argc, char** argv) {
   ReferenceOptions options;
   LargeStrainLattice lattice;
   bool levels_given = false;
-  bool json = false, quiet = false;
+  bool json = false, quiet = false, key_only = false;
   std::string log_level = "warn";
   std::vector<double> site;
   std::vector<TetMeshLevel> tet_meshes;
@@ -103,6 +105,7 @@ int main(int argc, char** argv) {
         if (site.size() != 2) throw std::invalid_argument("--site: expected X,Y (two numbers, m)");
       }
       else if (arg == "--json") json = true;
+      else if (arg == "--key") key_only = true;
       else if (arg == "--quiet") quiet = true;
       else if (arg == "--log-level") log_level = value();
       else if (arg == "--help" || arg == "-h") {
@@ -133,6 +136,10 @@ int main(int argc, char** argv) {
       place_indenter_at_site(scene, site[0], site[1], "--site");
     else if (tet_meshes.empty())
       check_site(scene, scene_file + ": /indenter/position");
+    if (key_only) {
+      std::cout << (depths.empty() ? reference_key(scene) : large_strain_reference_key(scene)) << "\n";
+      return 0;
+    }
     const double R = scene.indenter.radius;
     const double E_star = hertz::effective_modulus(scene.material.young_modulus, scene.material.poisson_ratio);
     if (forces.empty()) forces = scene.verify.forces;
