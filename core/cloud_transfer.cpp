@@ -124,7 +124,13 @@ void interpolation_rows(const Points& X, const std::vector<std::array<int, 4>>& 
   vertex_at.reserve(X.cols());
   for (int i = 0; i < X.cols(); ++i) vertex_at.emplace(key_of(X.col(i)), i);
   const TetrahedronGrid grid(X, tets);
-  constexpr double kTolerance = 1e-9;  // barycentric round-off on a face or an edge
+  // How far outside the other cloud's tetrahedra a point may lie, in barycentric coordinates
+  // (then extrapolated linearly from the nearest tetrahedron: exact for an affine field).
+  // Beyond round-off it is a curved body's surface: its new surface vertices lie on the
+  // curved surface (7.1a), outside the other refinement's coarser facets by up to their sag
+  // h^2 / (8 R_b), a coordinate of about -h / (8 R_b) (-0.01 for the dome's 3 mm facets).
+  // Further out, the point is not of the same body.
+  constexpr double kTolerance = 0.05;
   for (int i = 0; i < P.cols(); ++i) {
     const Vec3 p = P.col(i);
     if (const auto it = vertex_at.find(key_of(p)); it != vertex_at.end()) {

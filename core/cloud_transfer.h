@@ -31,12 +31,14 @@ struct CloudTransfer {
   std::vector<double> back_weight;  // its barycentric coordinate
   mutable std::vector<int> new_slot;  // new count, -1: transfer_state's scratch (its contact slots)
   int exact = 0;               // new particles that coincide with an old one
-  double worst_outside = 0.0;  // the most negative barycentric coordinate accepted (round-off on faces)
+  double worst_outside = 0.0;  // the most negative barycentric coordinate accepted (a face's round-off, a facet's sag)
 };
 
 // The weights (7.2) from the old cloud (reference positions and tetrahedra) to the new one,
-// and back. A position outside every tetrahedron of the other cloud (beyond round-off) is a
-// std::invalid_argument: the two clouds are not of the same body.
+// and back. A position just outside the other cloud (a curved body's new surface vertex,
+// outside the other refinement's facets by their sag: a barycentric coordinate down to
+// -0.05) is extrapolated from the nearest tetrahedron; one further outside every
+// tetrahedron is a std::invalid_argument: the two clouds are not of the same body.
 CloudTransfer make_cloud_transfer(const Points& old_rest, const std::vector<std::array<int, 4>>& old_tetrahedra,
                                   const Points& new_rest, const std::vector<std::array<int, 4>>& new_tetrahedra);
 

@@ -4,6 +4,7 @@
 // total contact force, and refuse a point that is not in the body.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 
 #include "core/cloud_transfer.h"
@@ -107,6 +108,44 @@ TEST(CloudTransfer, KeepsTheTotalContactForce) {
   State again = make_state(b.model, options_of(b.scene));
   transfer_state(transfer, a.model, old_state, b.model, again);
   EXPECT_EQ(again.contact_index, new_state.contact_index);
+}
+
+// A curved body: the dome's cloud refined at its pole and on its flank. Each refinement's new
+// skin vertices lie on the sphere (physics.md (7.1a)), so some lie outside the other cloud's
+// coarser facets, by up to their sag; they are extrapolated from the nearest tetrahedron,
+// which an affine field survives exactly, both ways.
+TEST(CloudTransfer, ACurvedBodysSurfaceVerticesOutsideTheOtherCloudsFacetsAreExtrapolated) {
+  auto dome_at = [](double x, double y) {
+    Refocused r;
+    r.scene = load_scene(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_dome_follow.json");
+    r.scene.indenter.position_given = true;
+    // A quarter of the radius out along the skin's normal: the refinement's focus is that point of the skin.
+    r.scene.indenter.position = 1.25 * Vec3(x, y, std::sqrt(0.05 * 0.05 - x * x - y * y));
+    r.cloud = make_node_cloud(r.scene);
+    r.model = build_model(r.scene, r.cloud);
+    return r;
+  };
+  const Refocused a = dome_at(0.0, 0.0), b = dome_at(0.012, 0.005);
+  const CloudTransfer there =
+      make_cloud_transfer(a.model.rest_position, a.cloud.tetrahedra, b.model.rest_position, b.cloud.tetrahedra);
+  EXPECT_LT(there.worst_outside, -1e-6);  // the flank's new skin vertices, outside the pole cloud's facets
+  EXPECT_GT(there.worst_outside, -0.05);
+  Mat3 G;
+  G << 0.01, -0.02, 0.005, 0.0, 0.03, -0.01, 0.02, 0.0, -0.04;
+  const Vec3 t(1e-4, -2e-4, -3e-4);
+  State old_state = make_state(a.model, options_of(a.scene));
+  for (int i = 0; i < a.model.particle_count; ++i) {
+    const Vec3 X = a.model.rest_position.col(i);
+    old_state.position.col(i) = X + G * X + t;
+  }
+  State new_state = make_state(b.model, options_of(b.scene));
+  transfer_state(there, a.model, old_state, b.model, new_state);
+  for (int i = 0; i < b.model.particle_count; ++i) {
+    const Vec3 X = b.model.rest_position.col(i);
+    if (!b.model.fixed[i]) {
+      ASSERT_LT((new_state.position.col(i) - (X + G * X + t)).norm(), 1e-15) << "particle " << i;
+    }
+  }
 }
 
 TEST(CloudTransfer, RefusesAPointOutsideTheBody) {
