@@ -283,6 +283,23 @@ TEST(MeshRefinement, SceneRefinesTowardTheTool) {
 namespace palpate {
 namespace {
 
+// The scene's model pressed to rest on the vertical guide at the smallest and the largest
+// verification force, each depth within 3.5 % of the reference's (the map's site (x, y), m).
+void press_against(const Scene& scene, const Reference& reference, double x, double y) {
+  const Model model = build_model(scene);
+  Options opt = options_of(scene);
+  opt.tool_guide = ToolGuide::vertical;
+  State state = make_state(model, opt);
+  for (double F : {0.05, 0.262}) {
+    const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, F);
+    ASSERT_TRUE(press.at_rest) << "site (" << x << ", " << y << "), " << F << " N";
+    const double d = indentation_at_tool(model, state), d_ref = reference_indentation(reference, F);
+    std::printf("%s at (%g, %g) mm, %g N: %+.2f %%\n", scene.name.c_str(), 1e3 * x, 1e3 * y, F, 100 * (d - d_ref) / d_ref);
+    EXPECT_NEAR(d, d_ref, 0.035 * d_ref) << "site (" << x << ", " << y << "), " << F << " N: "
+                                         << 100 * (d - d_ref) / d_ref << " %";
+  }
+}
+
 // A site nothing was prepared for: drawn (seeded) from the 25 sites of the surface map, the
 // follow scene's cloud refined there by the scene itself, pressed to rest on the vertical
 // guide at the smallest and the largest verification force, against that site's converged
@@ -304,20 +321,9 @@ TEST(MeshRefinement, AnUnanticipatedSiteIsOnItsReference) {
       a == 0.0 ? fs::path(PALPATE_SOURCE_DIR) / "scenes" / "references" / "palpation_block.json"
                : fs::path(PALPATE_SOURCE_DIR) / "data" / "verification" / "surface_map" / "references" /
                      ("palpation_block_site_" + text(a) + "_" + text(b) + ".json");
-  const Reference reference = load_reference(reference_file);
   Scene scene = load_scene(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_block_follow.json");
   place_indenter_at_site(scene, x, y);
-  const Model model = build_model(scene);
-  Options opt = options_of(scene);
-  opt.tool_guide = ToolGuide::vertical;
-  State state = make_state(model, opt);
-  for (double F : {0.05, 0.262}) {
-    const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, F);
-    ASSERT_TRUE(press.at_rest) << "site (" << x << ", " << y << "), " << F << " N";
-    const double d = indentation_at_tool(model, state), d_ref = reference_indentation(reference, F);
-    EXPECT_NEAR(d, d_ref, 0.035 * d_ref) << "site (" << x << ", " << y << "), " << F << " N: "
-                                         << 100 * (d - d_ref) / d_ref << " %";
-  }
+  press_against(scene, load_reference(reference_file), x, y);
 }
 
 }  // namespace
@@ -386,18 +392,7 @@ TEST(MeshRefinement, AnUnanticipatedSiteOfTheDomeIsOnItsReference) {
   r << std::hypot(x, y);
   const Reference reference = load_reference(fs::path(PALPATE_SOURCE_DIR) / "data" / "verification" / "surface_map" /
                                              "references" / ("palpation_dome_follow_site_" + r.str() + "_0.json"));
-  const Model model = build_model(scene);
-  Options opt = options_of(scene);
-  opt.tool_guide = ToolGuide::vertical;
-  State state = make_state(model, opt);
-  for (double F : {0.05, 0.262}) {
-    const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, F);
-    ASSERT_TRUE(press.at_rest) << "site (" << x << ", " << y << "), " << F << " N";
-    const double d = indentation_at_tool(model, state), d_ref = reference_indentation(reference, F);
-    std::printf("dome site (%g, %g) mm, %g N: %+.2f %%\n", 1e3 * x, 1e3 * y, F, 100 * (d - d_ref) / d_ref);
-    EXPECT_NEAR(d, d_ref, 0.035 * d_ref) << "site (" << x << ", " << y << "), " << F << " N: "
-                                         << 100 * (d - d_ref) / d_ref << " %";
-  }
+  press_against(scene, reference, x, y);
   fs::remove_all(dir);
 }
 
