@@ -158,35 +158,33 @@ class Refiner {
     if (static_cast<int64_t>(x_.size()) >= kMaxMeshNodes)
       throw std::invalid_argument("mesh refinement: more than " + std::to_string(kMaxMeshNodes) +
                                   " nodes (focus_size too small for this body)");
-    // The faces around e that belong to one tetrahedron only are boundary faces; their third
-    // vertices decide the midpoint's surface groups.
+    // The faces (a, b, c) around e that belong to one tetrahedron only are boundary faces: c
+    // appears once among the tetrahedra's other vertices. Their third vertices decide the
+    // midpoint's surface groups, their outward normals where it goes (7.1a).
     std::vector<int> third;
     for (int s : around)
       for (int v : tets_[s])
         if (v != a && v != b) third.push_back(v);
-    std::vector<Vec3> face_normals;  // the outward unit normals of the boundary faces around e
+    std::vector<int> boundary_third;
+    std::vector<Vec3> face_normals;  // the outward unit normals of those faces
     for (int s : around) {
-      const auto& v = tets_[s];
       int c[2], k = 0;
-      for (int u : v)
+      for (int u : tets_[s])
         if (u != a && u != b) c[k++] = u;
       for (int j = 0; j < 2; ++j)
         if (std::count(third.begin(), third.end(), c[j]) == 1) {
           Vec3 normal = (x_[b] - x_[a]).cross(x_[c[j]] - x_[a]);
           if (normal.dot(x_[c[1 - j]] - x_[a]) > 0) normal = -normal;  // away from the tetrahedron's fourth vertex
+          boundary_third.push_back(c[j]);
           face_normals.push_back(normal.normalized());
         }
     }
-    std::sort(third.begin(), third.end());
     const int m = static_cast<int>(x_.size());
     x_.push_back(boundary_midpoint(a, b, face_normals, around));
     for (auto& member : in_group_) {
       bool in = false;
       if (member[a] && member[b])
-        for (size_t k = 0; k < third.size() && !in; ++k) {
-          const bool once = (k == 0 || third[k - 1] != third[k]) && (k + 1 == third.size() || third[k + 1] != third[k]);
-          in = once && member[third[k]];
-        }
+        for (int c : boundary_third) in = in || member[c];
       member.push_back(in ? 1 : 0);
     }
     for (int s : around) {

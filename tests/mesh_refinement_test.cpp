@@ -190,7 +190,7 @@ TEST(MeshRefinement, MidpointsJoinTheSurfaceGroupsOfTheirFaces) {
 TEST(MeshRefinement, NewSurfaceVerticesLieOnTheCurvedSurfaceNotOnItsFacets) {
   // The dome's coarse base (skin facets about 3 mm on a sphere of radius 5 cm) refined to 1 mm
   // toward a point of its flank: a new vertex of the skin on the facet's chord would sit up to
-  // a facet's sag, h^2 / (8 R_b), inside the sphere; on the Hermite curve of (7.2) it is on the
+  // a facet's sag, h^2 / (8 R_b), inside the sphere; on the Hermite curve of (7.1a) it is on the
   // sphere to fourth order in h. The truth is the sphere |x| = R_b the base was meshed on.
   const double RB = 0.05;
   const TetMesh base = read_mesh(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "meshes" / "palpation_dome_base.msh");
