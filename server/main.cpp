@@ -11,6 +11,7 @@
 #include <netinet/tcp.h>
 #include <sys/socket.h>
 
+#include <malloc.h>
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
@@ -81,8 +82,9 @@ loop, or headless stepping on request. Once it accepts connections it prints one
                        VMs measured so far it did not lower the misses, server/README.md)
   --no-pin             do not pin threads (the default)
   --no-lock-memory     do not lock the server's memory (by default mlockall keeps every page
-                       resident, so no tick waits for a page fault; refused without the
-                       privilege: a warning, and it runs unlocked)
+                       resident, so no tick waits for a page fault, and freed memory stays in
+                       the heap for the next model; refused without the privilege: a warning,
+                       and it runs unlocked)
   --sndbuf BYTES       SO_SNDBUF of accepted sockets, bounding how far a slow reader falls
                        behind; 0 keeps the system's (default 262144)
   --max-sessions N     sessions at a time, [1, 1024] (default 16)
@@ -349,6 +351,15 @@ int main(int argc, char** argv) {
       spdlog::info("memory not locked: RLIMIT_MEMLOCK is {} bytes (ulimit -l unlimited to lock it)", limit.rlim_cur);
     else if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
       spdlog::warn("mlockall refused ({}): memory is not locked (--no-lock-memory hides this)", std::strerror(errno));
+    // Freed memory stays in the heap: a refocus builds a model of tens of MB on its worker
+    // and frees the one it replaces, and glibc would hand those blocks back to the system
+    // (munmap above its mmap threshold, a trim of the heap's top) and map and zero them again
+    // at the next build. Unmapping a thread's pages interrupts every core the process runs
+    // on to flush their TLBs, the loop's included. 32 MiB is the largest mmap threshold
+    // glibc accepts on 64 bits (larger blocks are still mapped); the heap is trimmed only
+    // past 1 GiB of free top. (Measured in docs/verification/surface_map/method.md.)
+    if (mallopt(M_MMAP_THRESHOLD, 32 << 20) != 1 || mallopt(M_TRIM_THRESHOLD, 1 << 30) != 1)
+      spdlog::warn("mallopt refused: freed memory may be returned to the system");
   }
   // Core 0 for the RPC thread and what it starts (the loops re-pin themselves to 1 ... n-1).
   if (args.options.pin_threads && std::thread::hardware_concurrency() >= 2) {

@@ -25,6 +25,7 @@
 #include "core/mesh_reader.h"
 #include "core/mesh_refinement.h"
 #include "core/node_cloud.h"
+#include "core/resolution.h"
 #include "core/scene.h"
 
 namespace palpate {
@@ -284,19 +285,20 @@ namespace palpate {
 namespace {
 
 // The scene's model pressed to rest on the vertical guide at the smallest and the largest
-// verification force, each depth within 3.5 % of the reference's (the map's site (x, y), m).
-void press_against(const Scene& scene, const Reference& reference, double x, double y) {
+// force of its verification sweep, each depth within `tolerance` (3.5 %) of the reference's
+// (the map's site (x, y), m).
+void press_against(const Scene& scene, const Reference& reference, double x, double y, double tolerance = 0.035) {
   const Model model = build_model(scene);
   Options opt = options_of(scene);
   opt.tool_guide = ToolGuide::vertical;
   State state = make_state(model, opt);
-  for (double F : {0.05, 0.262}) {
+  for (double F : {scene.verify.forces.front(), scene.verify.forces.back()}) {
     const PressResult press = press_to_rest(model, opt, scene.verify.rest, state, F);
     ASSERT_TRUE(press.at_rest) << "site (" << x << ", " << y << "), " << F << " N";
     const double d = indentation_at_tool(model, state), d_ref = reference_indentation(reference, F);
     std::printf("%s at (%g, %g) mm, %g N: %+.2f %%\n", scene.name.c_str(), 1e3 * x, 1e3 * y, F, 100 * (d - d_ref) / d_ref);
-    EXPECT_NEAR(d, d_ref, 0.035 * d_ref) << "site (" << x << ", " << y << "), " << F << " N: "
-                                         << 100 * (d - d_ref) / d_ref << " %";
+    EXPECT_NEAR(d, d_ref, tolerance * d_ref) << "site (" << x << ", " << y << "), " << F << " N: "
+                                              << 100 * (d - d_ref) / d_ref << " %";
   }
 }
 
@@ -324,6 +326,31 @@ TEST(MeshRefinement, AnUnanticipatedSiteIsOnItsReference) {
   Scene scene = load_scene(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_block_follow.json");
   place_indenter_at_site(scene, x, y);
   press_against(scene, load_reference(reference_file), x, y);
+}
+
+// Another tool, another material, another sweep, and no cloud made for them: the follow
+// scene with a 5 mm tool (not 10), a nearly incompressible neo-Hookean tissue (nu 0.45, not a
+// corotational 0.3) and forces of 0.02 ... 0.15 N, its refinement's size left to the scene
+// (three spacings across the smallest force's contact radius: 0.48 mm, core/resolution.h), at
+// the stable step of that spacing. Against the large-strain reference of the same block, law
+// and tool (neo-Hookean bricks, the tool held: a different method; palpate-reference --depths,
+// uncertain by 0.9 ... 1.7 %, data/verification/surface_map/references), within the issue's
+// 2 % at the smallest force as at the largest (measured +0.5 and -1.0 %; with the 10 mm tool's
+// 1 mm refinement +0.9 and +0.7 %). The corotational law at nu 0.45 is 4.6 ... 10 % deeper than
+// the linear finite-layer solution and would fail here: it is not the neo-Hookean law.
+TEST(MeshRefinement, AnotherToolAndANearlyIncompressibleTissueNeedNoCloudMadeForThem) {
+  const Scene scene = load_scene(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_block_follow.json",
+                                 {{"indenter.radius", "0.005"},
+                                  {"material.poisson_ratio", "0.45"},
+                                  {"material.law", "\"neo_hookean\""},
+                                  {"body.distribution.refine", R"({"growth": 1.2, "max_size": 0.0035})"},
+                                  {"integrator.dt", "0.00025"},
+                                  {"verify.forces", "[0.02, 0.05, 0.1, 0.15]"}});
+  const Reference reference = load_reference(fs::path(PALPATE_SOURCE_DIR) / "data" / "verification" / "surface_map" /
+                                             "references" / "palpation_block_r5_nu0.45_neo_hookean.json");
+  EXPECT_EQ(reference.key, large_strain_reference_key(scene));
+  EXPECT_NEAR(scene.distribution.refine.size, required_resolution(scene).contact_spacing, 1e-12);
+  press_against(scene, reference, 0.0, 0.0, 0.02);
 }
 
 }  // namespace

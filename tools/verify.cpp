@@ -267,9 +267,13 @@ int main(int argc, char** argv) {
     if (std::isfinite(l2_layer)) std::printf(", against finite-layer Hertz: %.2f %%", 100 * l2_layer);
     if (std::isfinite(l2_reference)) std::printf(", against the converged reference: %.2f %%", 100 * l2_reference);
     std::printf("\n");
-    // The method shows in the levels: lattices have nodes per edge, tetrahedral meshes none.
+    // The method shows in the levels (lattices have nodes per edge, tetrahedral meshes none)
+    // and in the key (the large-strain reference's ends with the held tool).
     const bool tetrahedra = reference && !reference->levels.empty() && reference->levels[0].per_edge == 0;
-    const std::string method = tetrahedra ? "linear tetrahedra, meshes refined at the site" : "linear hex FEM, graded";
+    const bool large_strain = reference && reference->key.ends_with(" held");
+    const std::string method = tetrahedra     ? "linear tetrahedra, meshes refined at the site"
+                               : large_strain ? "neo-Hookean hex FEM, graded, the tool held"
+                                              : "linear hex FEM, graded";
     std::printf("d_ref: %s\n", reference ? (method + ", extrapolated (" + reference->key + ")").c_str()
                                          : sweep.reference_note.c_str());
   }
