@@ -336,8 +336,8 @@ TEST(MeshRefinement, AnUnanticipatedSiteIsOnItsReference) {
 // and tool (neo-Hookean bricks, the tool held: a different method; palpate-reference --depths,
 // uncertain by 0.9 ... 1.7 %, data/verification/surface_map/references), within the issue's
 // 2 % at the smallest force as at the largest (measured +0.5 and -1.0 %; with the 10 mm tool's
-// 1 mm refinement +0.9 and +0.7 %). The corotational law at nu 0.45 is 4.6 ... 10 % deeper than
-// the linear finite-layer solution and would fail here: it is not the neo-Hookean law.
+// 1 mm refinement +0.9 and +0.7 %). The corotational law at nu 0.45, another law, is +4.2 and
+// +7.2 % against this reference and would fail here.
 TEST(MeshRefinement, AnotherToolAndANearlyIncompressibleTissueNeedNoCloudMadeForThem) {
   const Scene scene = load_scene(fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpation_block_follow.json",
                                  {{"indenter.radius", "0.005"},
