@@ -15,7 +15,8 @@ cd "$(dirname "$0")/.."
 scripts/setup.sh >&2  # what it installs shows even when the build output is hidden
 BUILD_DIR=${BUILD_DIR:-build}
 read -ra flags <<< "${CMAKE_FLAGS:-}"
-cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" -DPALPATE_ARCH=auto "${flags[@]}" >/dev/null
+source scripts/lib/configure.sh
+palpate_configure "$BUILD_DIR" -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" -DPALPATE_ARCH=auto "${flags[@]}"
 targets=()
 for target in "$@"; do targets+=(--target "$target"); done
 cmake --build "$BUILD_DIR" -j"${JOBS:-$(nproc)}" "${targets[@]}"

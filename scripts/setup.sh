@@ -4,6 +4,7 @@
 set -euo pipefail
 packages=(
   build-essential cmake pkg-config
+  ninja-build                 # the generator of new build folders (scripts/lib/configure.sh)
   libeigen3-dev libnanoflann-dev
   capnproto libcapnp-dev
   libspdlog-dev libgtest-dev libbenchmark-dev

@@ -38,6 +38,7 @@ if [ "${1:-}" != "--sanitize" ]; then
 fi
 
 scripts/setup.sh
+source scripts/lib/configure.sh
 jobs=$(nproc)
 # -O1 -g1 (line tables), assertions on: half the compile time of RelWithDebInfo, file:line in reports.
 flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1")
@@ -47,7 +48,7 @@ export TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1
 step() { echo "== test.sh --sanitize: $* ($(date +%T))"; }
 
 step "ASan + UBSan build (build-asan)"
-cmake -S . -B build-asan "${flags[@]}" -DPALPATE_SANITIZE=address,undefined >/dev/null
+palpate_configure build-asan "${flags[@]}" -DPALPATE_SANITIZE=address,undefined
 # Only what the suite runs (the palpate-tests target, tests/CMakeLists.txt): the benchmarks
 # and tools no test starts are left out, which saves minutes of sanitized compiling.
 cmake --build build-asan -j"$jobs" --target palpate-tests
@@ -62,14 +63,14 @@ cmake --build build-asan -j"$jobs" --target palpate-tests
 (cd build-asan && ctest --output-on-failure -j"$jobs" --repeat until-pass:2)
 
 step "TSan build of the server and its e2e test (build-tsan)"
-cmake -S . -B build-tsan "${flags[@]}" -DPALPATE_SANITIZE=thread >/dev/null
+palpate_configure build-tsan "${flags[@]}" -DPALPATE_SANITIZE=thread
 cmake --build build-tsan -j"$jobs" --target palpate-server server_e2e_test
 # The same for ThreadSanitizer (5-15x slower).
 (cd build-tsan && ctest --output-on-failure -R '^server_e2e(_timing)?$' --repeat until-pass:2)
 
 step "libFuzzer targets (build-fuzz, clang)"
-CC=clang CXX=clang++ cmake -S . -B build-fuzz "${flags[@]}" -DPALPATE_FUZZ=ON \
-  -DPALPATE_SANITIZE=address,undefined -DPALPATE_FUZZ_SECONDS="${FUZZ_SECONDS:-20}" >/dev/null
+CC=clang CXX=clang++ palpate_configure build-fuzz "${flags[@]}" -DPALPATE_FUZZ=ON \
+  -DPALPATE_SANITIZE=address,undefined -DPALPATE_FUZZ_SECONDS="${FUZZ_SECONDS:-20}"
 cmake --build build-fuzz -j"$jobs" --target palpate-fuzzers
 (cd build-fuzz && ctest --output-on-failure -j"$jobs" -L fuzz)
 step "done"

@@ -232,6 +232,9 @@ TEST(LargeStrainReference, AtSmallDepthItIsTheLinearBlock) {
     return o.str();
   };
   for (const auto& [nu, d] : {std::pair<std::string, double>{"0.3", 0.005}, {"0.45", 0.0025}}) {
+    // The sanitized builds solve the first only: the second takes the same code with another
+    // material (25 s more there), and the Release suite checks its numbers.
+    if (test::kSanitized && nu == "0.45") continue;
     SCOPED_TRACE("poisson_ratio " + nu);
     const std::string material = R"("material": {"poisson_ratio": )" + nu;
     Scene scene = test::scene_from_json("{" + material + R"(, "law": "neo_hookean"}})");

@@ -27,6 +27,7 @@
 #include "core/node_cloud.h"
 #include "core/resolution.h"
 #include "core/scene.h"
+#include "test_util.h"
 
 namespace palpate {
 namespace {
@@ -350,6 +351,9 @@ TEST(MeshRefinement, AnotherToolAndANearlyIncompressibleTissueNeedNoCloudMadeFor
                                              "references" / "palpation_block_r5_nu0.45_neo_hookean.json");
   EXPECT_EQ(reference.key, large_strain_reference_key(scene));
   EXPECT_NEAR(scene.distribution.refine.size, required_resolution(scene).contact_spacing, 1e-12);
+  // Under the sanitizers the presses took 85 s; what they run (a cloud refined in-process,
+  // its model, a press to rest) AnUnanticipatedSiteIsOnItsReference runs there too.
+  if (test::kSanitized) GTEST_SKIP() << "the presses at 0.48 mm run in the Release suite";
   press_against(scene, reference, 0.0, 0.0, 0.02);
 }
 
