@@ -5,9 +5,9 @@
 #
 # A new build folder gets the Ninja generator (Debian's ninja-build, from scripts/setup.sh):
 # it compiles a target's sources while the libraries the target links are still being built,
-# where Make waits for each library whole (on two cores a sanitized build then spent minutes
-# on the force loops' one long file with the other core idle). A folder configured before
-# keeps the generator it has (CMake refuses to change it).
+# where Make waits for each library whole, so that one long file (the force loops') does not
+# hold back every target that links its library. A folder configured before keeps the
+# generator it has (CMake refuses to change it).
 palpate_configure() {
   local dir=$1
   shift
