@@ -138,6 +138,11 @@ TEST(GuideStudy, ThePlanRunsAndMerges) {
   const ProgramResult count = run_program({PALPATE_STUDY_BIN, plan, "--scenes", scenes, "--count"}, limit(20));
   ASSERT_EQ(count.status, 0) << count.err;
   EXPECT_EQ(count.out, "3\n");
+#ifdef PALPATE_SANITIZED
+  // The three presses of the dome take 54 s under ASan + UBSan and run nothing of palpate-study
+  // that StudyTest does not run there; the Release suite runs them and checks their errors.
+  GTEST_SKIP() << "the plan's presses run in the Release suite (palpate-study runs under the sanitizers in StudyTest)";
+#endif
   const TempDir dir;
   const std::string& out = dir.path;
   const ProgramResult all =

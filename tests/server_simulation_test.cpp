@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <set>
@@ -250,31 +251,33 @@ TEST(Simulation, DerivedFieldsCopyThePositionsIntoPreallocatedSlots) {
   wait_until_started(sim);
   ASSERT_EQ(sim.phase(), Phase::ready);
   const int n = sim.shown_model().particle_count;
-  auto frames_for = [&](int ms) {
-    std::vector<const Snapshot*> seen;
+  // Calls check on every frame taken for ms milliseconds, while it is the reader's: the loop
+  // writes a slot again once the reader has taken another (a pointer kept past the next take()
+  // would be read while the loop refills it).
+  auto each_frame_for = [&](int ms, const std::function<void(const Snapshot&)>& check) {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
     while (std::chrono::steady_clock::now() < deadline) {
       wait_for_wake(sim, 50);
-      if (sim.frames().take()) seen.push_back(&sim.frames().front());
+      if (sim.frames().take()) check(sim.frames().front());
     }
-    return seen;
   };
+  const auto skip = [](const Snapshot&) {};
   sim.set_wanted(false, false, false);
-  frames_for(50);  // frames published before the change are gone
-  for (const Snapshot* s : frames_for(100)) EXPECT_FALSE(s->has_body_position) << "tick " << s->tick;
+  each_frame_for(50, skip);  // frames published before the change are gone
+  each_frame_for(100, [](const Snapshot& s) { EXPECT_FALSE(s.has_body_position) << "tick " << s.tick; });
   sim.set_wanted(true, false, true);
-  frames_for(20);
+  each_frame_for(20, skip);
   std::set<const double*> buffers;
   size_t checked = 0;
-  for (const Snapshot* s : frames_for(200)) {
-    ASSERT_TRUE(s->has_body_position) << "tick " << s->tick;
-    ASSERT_EQ(s->body_position.cols(), n);
-    buffers.insert(s->body_position.data());
-    ASSERT_EQ(s->positions.size(), 3 * static_cast<size_t>(n));
-    for (size_t k = 0; k < s->positions.size(); ++k)
-      EXPECT_EQ(s->positions[k], static_cast<float>(s->body_position.data()[k]));
+  each_frame_for(200, [&](const Snapshot& s) {
+    ASSERT_TRUE(s.has_body_position) << "tick " << s.tick;
+    ASSERT_EQ(s.body_position.cols(), n);
+    buffers.insert(s.body_position.data());
+    ASSERT_EQ(s.positions.size(), 3 * static_cast<size_t>(n));
+    for (size_t k = 0; k < s.positions.size(); ++k)
+      ASSERT_EQ(s.positions[k], static_cast<float>(s.body_position.data()[k])) << "tick " << s.tick << ", entry " << k;
     ++checked;
-  }
+  });
   EXPECT_GE(checked, 20u);
   EXPECT_LE(buffers.size(), 3u) << "the triple buffer's slots, no others";
   sim.stop();
