@@ -22,6 +22,7 @@
 #   --out DIR      output folder (default docs/verification/surface_map)
 #   --raw RAW      the presses' JSON and the references' cache (surface_map_study.sh's --raw)
 #   --jobs N       passed to surface_map_study.sh (default 2)
+#   --set KEY=VALUE passed to surface_map_study.sh (repeatable; give --out)
 # BUILD_DIR (default build) holds bin/palpate-verify and bin/palpate-reference (nothing is
 # compiled). Paths are relative to the repository root.
 # shellcheck source=SCRIPTDIR/lib/study_common.sh
@@ -32,6 +33,7 @@ depth=0.0012
 out=docs/verification/surface_map
 raw=
 jobs=2
+sets=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --scene) scene=${2:?--scene needs a file}; shift ;;
@@ -39,6 +41,7 @@ while [[ $# -gt 0 ]]; do
     --out) out=${2:?--out needs a folder}; shift ;;
     --raw) raw=${2:?--raw needs a folder}; shift ;;
     --jobs) jobs=${2:?--jobs needs a number}; shift ;;
+    --set) sets+=(--set "${2:?--set needs KEY=VALUE}"); shift ;;
     -h|--help) study_help ;;
     *) study_unknown_option "$1" ;;
   esac
@@ -51,7 +54,7 @@ folder=$(cd "$(dirname "$scene")" && pwd)
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-common=(--out "$out" --raw "$raw" --jobs "$jobs")
+common=(--out "$out" --raw "$raw" --jobs "$jobs" "${sets[@]}")
 scripts/surface_map_study.sh --scene "$scene" --no-symmetric "${common[@]}"
 
 # The same scene without its inclusions, where its relative paths still resolve.

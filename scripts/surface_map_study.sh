@@ -83,6 +83,10 @@
 #   --half-width A    with --dome: the grid's half-width (m; default RB / 2)
 #   --tet-levels LIST with --dome: the reference meshes' scale factors s, coarse to fine
 #                     (default '0.5 0.397 0.315'; at least three)
+#   --set KEY=VALUE   override a scene field in every press and reference (palpate-verify
+#                     and palpate-reference --set; repeatable), e.g. mls.neighbors=20; the
+#                     grid is still placed from the scene file's box and tool radius, and the
+#                     outputs keep the scene's name: give --out
 # Paths are relative to the repository root.
 # shellcheck source=SCRIPTDIR/lib/study_common.sh
 source "$(dirname "$0")/lib/study_common.sh"
@@ -100,6 +104,7 @@ cache=
 dome=
 half_width=
 tet_levels="0.5 0.397 0.315"
+sets=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --build) build=${2:?--build needs a folder}; shift ;;
@@ -116,6 +121,7 @@ while [[ $# -gt 0 ]]; do
     --dome) dome=${2:?--dome needs a radius}; shift ;;
     --half-width) half_width=${2:?--half-width needs a length}; shift ;;
     --tet-levels) tet_levels=${2:?--tet-levels needs a list}; shift ;;
+    --set) sets+=(--set "${2:?--set needs KEY=VALUE}"); shift ;;
     -h|--help) study_help ;;
     *) study_unknown_option "$1" ;;
   esac
@@ -175,6 +181,7 @@ if box is None:
              scene_file)
 lo, hi, R = box["min"], box["max"], scene["indenter"]["radius"]
 cx, cy = 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])
+symmetric = symmetric == "1"  # "0" with --no-symmetric (and for any block but palpation_block)
 if symmetric:
     why = []
     if abs((hi[0] - lo[0]) - (hi[1] - lo[1])) > 1e-12 * (hi[0] - lo[0]): why.append("the top face is not square")
@@ -236,6 +243,7 @@ PY
     fi
   fi
   mapfile -t args < "$file"
+  args=("${sets[@]}" "${args[@]}")
 }
 # key X Y: the reference key palpate-verify expects at a site (palpate-reference --key; it
 # also refuses a site off the face or closer than R to a wall).
