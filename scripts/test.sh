@@ -8,7 +8,7 @@
 #     agones_e2e_timing, SimulationTiming.*). They run by default, serially, after the rest. With
 #     CI=true (a shared runner) their failure is reported ("timing tests failed on a noisy host
 #     (not a defect)") and does not fail the suite; everywhere else it does.
-#   scripts/test.sh --sanitize     the robustness suite (docs/robustness.md), ~20-25 min on 2 cores:
+#   scripts/test.sh --sanitize     the robustness suite (docs/robustness.md), 27-31 min on 2 cores (7 December 2026):
 #     1. AddressSanitizer + UndefinedBehaviorSanitizer build of what the suite runs in build-asan/,
 #        the whole suite (UBSan stops at the first report, LeakSanitizer at exit);
 #     2. ThreadSanitizer build of the server and its e2e test in build-tsan/, that test;
