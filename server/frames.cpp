@@ -80,7 +80,10 @@ void fill_frame(wire::Frame::Builder f, const Snapshot& s, const FieldRequest& w
   f.setIndenterContactForce(s.tool_contact_force[2]);
   f.setIndentation(s.indentation);
   f.setForceCommand(-s.force_command[2]);
-  f.setCommandSeq(render ? std::max(render->command_seq, s.command_seq) : s.command_seq);
+  // Multirate: the newest command the rendered force includes (docs/protocol.md, "Multirate"),
+  // not the newest step's: a render made from an older step than `s` (the step that switched
+  // to position mode not yet rendered) would otherwise claim a setPosition it does not render.
+  f.setCommandSeq(render ? render->command_seq : s.command_seq);
   f.setRecoveries(s.recoveries);
   set_vec3(f.initToolVelocity(), s.tool_velocity);
   set_vec3(f.initToolContactForce(), s.tool_contact_force);

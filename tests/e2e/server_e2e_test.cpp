@@ -1373,6 +1373,11 @@ TEST(ServerE2E, MultirateFramesComeAtTheRenderRateFromTheNewestStep) {
   const auto first = std::find_if(seen.begin(), seen.end(), [&](const Seen& s) { return s.seq >= seq; });
   ASSERT_NE(first, seen.end());
   EXPECT_EQ(first->target_z, touch + 0.05);
+  // And so does every later frame: a frame's commandSeq is what its force includes, so no
+  // frame claims the setPosition while rendering an older target (the render of a step from
+  // before it, packed with a newer step that applied it).
+  for (auto k = first; k != seen.end(); ++k)
+    ASSERT_EQ(k->target_z, touch + 0.05) << "render tick " << k->haptic_tick << " of step " << k->tick;
   std::printf("multirate: %zu frames of %zu render ticks over %zu steps; stats: %lld render ticks, %llu misses, "
               "model age p50 %.0f us p99 %.0f us\n",
               seen.size(), renders.size(), steps.size(), static_cast<long long>(stats.getHapticTicks()),
