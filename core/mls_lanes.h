@@ -15,7 +15,7 @@
 #define PALPATE_UNROLL _Pragma("GCC unroll 16")
 // The helpers of one block are inlined into its loop, so that its matrices stay in registers.
 // Not forced in the sanitized builds (scripts/test.sh --sanitize): there the forced inlining
-// made core/mls_forces.cpp a 84 s compile under ASan + UBSan at -O1 (29 s without), and the
+// made core/mls_forces.cpp an 84 s compile under ASan + UBSan at -O1 (29 s without), and the
 // loops ran no faster for it (MassFloor.* 45.5 / 43.6 s, Refocus.AnInlineRunIsDeterministic
 // 27.2 / 27.1 s, forced / not; docs/robustness.md "CI time").
 #ifdef PALPATE_SANITIZED

@@ -1373,9 +1373,8 @@ TEST(ServerE2E, MultirateFramesComeAtTheRenderRateFromTheNewestStep) {
   const auto first = std::find_if(seen.begin(), seen.end(), [&](const Seen& s) { return s.seq >= seq; });
   ASSERT_NE(first, seen.end());
   EXPECT_EQ(first->target_z, touch + 0.05);
-  // And so does every later frame: a frame's commandSeq is what its force includes, so no
-  // frame claims the setPosition while rendering an older target (the render of a step from
-  // before it, packed with a newer step that applied it).
+  // And so does every later frame (no command follows). Which command a frame names when its
+  // render is older than its step is pinned without the race in tests/server_frames_test.cpp.
   for (auto k = first; k != seen.end(); ++k)
     ASSERT_EQ(k->target_z, touch + 0.05) << "render tick " << k->haptic_tick << " of step " << k->tick;
   std::printf("multirate: %zu frames of %zu render ticks over %zu steps; stats: %lld render ticks, %llu misses, "
