@@ -100,9 +100,9 @@ LaneFill lane_fill(const Model& m) {
 // The pair work a tick would do if each particle's forces were evaluated at its own stable
 // rate, as a multi-time-step scheme would: the stable step of a region grows with its spacing
 // (at one density and modulus, dt ~ h / c), so particle i could step floor(h_i / h_min) ticks
-// at a time, h its support radius. The fraction of a tick's pairs that leaves: a bound on what
-// such a scheme saves (it ignores the coupling at the interfaces between rates). NAN for a
-// hexahedral model.
+// at a time, h its support radius. Returns the fraction of a tick's pair work that remains: the
+// least such a scheme would do (it ignores the coupling at the interfaces between rates). NAN
+// for a hexahedral model.
 double own_rate_pair_work(const Model& m) {
   if (m.support_radius.empty() || m.neighbor_offset.back() == 0) return NAN;
   const double h_min = *std::min_element(m.support_radius.begin(), m.support_radius.end());
@@ -445,7 +445,7 @@ int main(int argc, char** argv) {
                   "  its neighbour slots", 100 * fill.slots, "", "", 100 * fill.block_union);
     if (!std::isnan(own_rate))
       std::printf("  %-34s %10.0f %%   of a tick's pairs, each particle's forces at its own stable rate\n"
-                  "  %-34s %10s      (every floor(h_i / h_min) ticks: what a multi-time-step scheme could save)\n",
+                  "  %-34s %10s      (every floor(h_i / h_min) ticks: the least a step with several rates would do)\n",
                   "  its pairs at their own rates", 100 * own_rate, "", "");
     std::printf("  %-34s %10.4f ms\n", "mls_force_differential (K dx)", tangent_ms);
     std::printf("  %-34s %10.4f ms   (%d contacts)\n", "RK4 step", rk4_ms, rk4_contacts);
