@@ -189,8 +189,11 @@ int main(int argc, char** argv) {
   // and contact set), restored without allocation; one State per thread count serves all
   // integrators.
   const Checkpoint start(pressed);
-  bool all_ok = true;
-  auto check = [&](StepStatus st) { all_ok = all_ok && st == StepStatus::ok; };
+  // The first timed operation whose step did not return ok, with its status ("" when all did).
+  std::string first_fault;
+  auto check = [&](StepStatus st, const char* what) {
+    if (st != StepStatus::ok && first_fault.empty()) first_fault = std::string(what) + ": " + to_string(st);
+  };
   const Points& start_position = start.saved().position;
 
   // The timed operations, run round-robin (each after its untimed setup) so that
@@ -245,27 +248,27 @@ int main(int argc, char** argv) {
     // One application of the tangent stiffness (the work of a CG iteration of implicit Euler).
     auto apply_tangent = [&model, &start, &w] { elastic_force_differential(model, w.linearized, start.saved().velocity, w.df); };
     ops[tangent] = {apply_tangent, apply_tangent, repeats, {}};
-    ops[rk4_step] = {restore, [&] { check(step(model, w.rk4_opt, timed)); }, repeats, {}};
+    ops[rk4_step] = {restore, [&] { check(step(model, w.rk4_opt, timed), "RK4 step"); }, repeats, {}};
     ops[rk4_free] = {restore, [&] { free_motion_rk4(model, w.rk4_opt, timed); }, repeats, {}};
     ops[rk4_contact] = {[&, restore] { restore(); free_motion_rk4(model, w.rk4_opt, timed); },
-                        [&] { check(solve_contact(model, w.rk4_opt, timed)); }, repeats, {}};
-    ops[se_step] = {restore, [&] { check(step(model, w.se_opt, timed)); }, repeats, {}};
+                        [&] { check(solve_contact(model, w.rk4_opt, timed), "RK4 contact solve"); }, repeats, {}};
+    ops[se_step] = {restore, [&] { check(step(model, w.se_opt, timed), "symplectic-Euler step"); }, repeats, {}};
     ops[se_free] = {restore, [&] { free_motion_symplectic_euler(model, w.se_opt, timed); }, repeats, {}};
     // Linearly implicit Euler with a larger step: CG for the free motion plus the coupled
     // contact response. Timed as a step of a running implicit-Euler simulation: the second
     // implicit-Euler step from the pressed state (the first, untimed, is the setup; the
     // workspace carries whatever the previous step left in it), and as the first implicit-Euler
     // step of a fresh State (its workspace as make_state leaves it; set up untimed).
-    ops[ie_step] = {[&, restore] { restore(); check(step(model, w.ie_opt, timed)); },
-                    [&] { check(step(model, w.ie_opt, timed)); }, ie_repeats, {}};
+    ops[ie_step] = {[&, restore] { restore(); check(step(model, w.ie_opt, timed), "implicit-Euler step"); },
+                    [&] { check(step(model, w.ie_opt, timed), "implicit-Euler step"); }, ie_repeats, {}};
     ops[ie_first] = {[&] { w.fresh.emplace(make_state(model, w.ie_opt)); start.restore(*w.fresh); },
-                     [&] { check(step(model, w.ie_opt, *w.fresh)); }, ie_repeats, {}};
+                     [&] { check(step(model, w.ie_opt, *w.fresh), "implicit-Euler first step"); }, ie_repeats, {}};
     ops[ie_free] = {restore, [&] { free_motion_implicit_euler(model, w.ie_opt, timed); }, ie_repeats, {}};
     // The per-step health checks alone (core/health.h; part of every step above).
     ops[health] = {[&, restore] {
                      restore();
                      free_motion_symplectic_euler(model, w.se_opt, timed);
-                     check(solve_contact(model, w.se_opt, timed));
+                     check(solve_contact(model, w.se_opt, timed), "symplectic-Euler contact solve");
                    },
                    [&] { (void)check_health(model, w.se_opt, timed, StepStatus::ok); }, repeats, {}};
     for (Op& op : ops) op.ms.reserve(op.repeats);
@@ -301,20 +304,20 @@ int main(int argc, char** argv) {
 
   // What the last timed steps did (every repetition does the same).
   restore();
-  check(step(model, rk4_opt, timed));
+  check(step(model, rk4_opt, timed), "RK4 step");
   const int rk4_contacts = static_cast<int>(timed.contact_index.size());
   const int rk4_candidates = static_cast<int>(timed.out.contact_candidate.size());
   const int rk4_pivots = timed.out.contact_iterations;  // both projections' LCP iterations
   restore();
-  check(step(model, ie_opt, timed));
-  check(step(model, ie_opt, timed));
+  check(step(model, ie_opt, timed), "implicit-Euler step");
+  check(step(model, ie_opt, timed), "implicit-Euler step");
   const int ie_cg_iterations = timed.out.cg_iterations;
   const int ie_candidates = static_cast<int>(timed.out.contact_candidate.size());
   const int ie_contacts = static_cast<int>(timed.contact_index.size());
   const StepOutputs ie_out = timed.out;
   State first = make_state(model, ie_opt);
   start.restore(first);
-  check(step(model, ie_opt, first));
+  check(step(model, ie_opt, first), "implicit-Euler first step");
   const StepOutputs ie_first_out = first.out;
   // The contact stage's CG work (core/contact.h): solves, iterations, compliance columns, splitting iterations.
   auto contact_work = [](const StepOutputs& o) {
@@ -398,7 +401,8 @@ int main(int argc, char** argv) {
   j["health_check_ms"] = health_ms;
   j["health_check_fraction_rk4"] = health_ms / rk4_ms;
   j["health_check_fraction_symplectic_euler"] = health_ms / se_ms;
-  j["all_steps_ok"] = all_ok;
+  j["all_steps_ok"] = first_fault.empty();
+  j["first_fault"] = first_fault.empty() ? nlohmann::json(nullptr) : nlohmann::json(first_fault);
   // The other thread count: its medians and the speed-up (one thread's time over its).
   const char* kCompared[][2] = {{"force_eval_ms", "internal forces"},
                                 {"force_differential_ms", "tangent K dx"},
@@ -477,7 +481,8 @@ int main(int argc, char** argv) {
         std::printf("  %-34s %7.4f ms %7.4f ms %8.2fx\n", kCompared[k][1], one, many, one / many);
       }
     }
-    if (!all_ok) std::printf("\nwarning: some timed steps did not return ok\n");
+    if (!first_fault.empty())
+      std::printf("\nwarning: some timed steps did not return ok; the first: %s\n", first_fault.c_str());
   }
   return 0;
 }
