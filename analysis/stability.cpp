@@ -79,6 +79,8 @@ Search find_stable_dt(const Model& model, const Options& opt, const TrialSpec& t
   auto stable = [&](double dt) {
     Options at_dt = opt;
     at_dt.integrator.dt = dt;
+    // One rate: a subcycled scene's schedule is built for its own dt (core/rate_schedule.h).
+    at_dt.integrator.max_interval = 1;
     const Trial t = run_trial(model, at_dt, trial);
     ++out.trials;
     if (!t.stable && dt < failure_dt) {

@@ -280,6 +280,7 @@ StaticSolution relax_to_rest(const Model& model, const Options& opt, const RestS
   // half the step; an accepted one doubles it.
   Options relax = opt;
   relax.integrator.type = IntegratorType::implicit_euler;
+  relax.integrator.max_interval = 1;  // subcycling is symplectic Euler's
   relax.integrator.damping = 0.0;
   relax.indenter_mass = std::max(opt.indenter_mass, std::accumulate(model.mass.begin(), model.mass.end(), 0.0));
   state.force_command = press_down(force);
@@ -350,6 +351,7 @@ StaticSolution relax_to_rest_at(const Model& model, const Options& opt, State& s
   // residual grows is rejected and retried with half the step; an accepted one doubles it.
   Options relax = opt;
   relax.integrator.type = IntegratorType::implicit_euler;
+  relax.integrator.max_interval = 1;  // subcycling is symplectic Euler's
   relax.integrator.damping = 0.0;
   relax.tool_guide = ToolGuide::free;
   relax.coupling = CouplingOptions{};

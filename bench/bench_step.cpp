@@ -26,6 +26,7 @@
 #include "cli/arguments.h"
 #include "cli/statistics.h"
 #include "tools/load_scene.h"
+#include "core/rate_schedule.h"
 #include "core/checkpoint.h"
 #include "core/contact.h"
 #include "core/health.h"
@@ -63,6 +64,9 @@ same run, interleaved); prints medians.
   --threads N       also time everything on N threads (integrator.threads = N) and
                     print the speed-up over one thread (default 1: one thread only)
   --json            print one JSON object instead of the table
+With the scene's integrator.max_interval above 1 (--set integrator.max_interval=8), also
+times the multirate symplectic-Euler step (core/rate_schedule.h) over a period of
+ticks, and prints the pair work its ticks evaluate.
 )";
 
 using cli::median;
@@ -83,9 +87,8 @@ LaneFill lane_fill(const Model& m) {
   std::vector<int> neighbours;
   for (size_t b = 0; b < m.blocks.size(); ++b) {
     neighbours.clear();
-    for (int l = 0; l < Model::block_width; ++l) {
-      const int i = Model::block_width * static_cast<int>(b) + l;
-      if (i >= m.particle_count) break;
+    for (int l = 0; l < m.blocks[b].lanes; ++l) {
+      const int i = m.blocks[b].particle[l];
       neighbours.insert(neighbours.end(), m.neighbor_index.begin() + m.neighbor_offset[i],
                         m.neighbor_index.begin() + m.neighbor_offset[i + 1]);
     }
@@ -159,7 +162,11 @@ int main(int argc, char** argv) {
   Options held = scene_options;
   held.tool_guide = ToolGuide::vertical;
   held.integrator.threads = 1;  // pressing in; the timed variants set their own
+  held.integrator.max_interval = 1;  // one rate; the multirate step's options below
   Options rk4_opt = held, se_opt = held, ie_opt = held;
+  Options multirate_opt = se_opt;
+  multirate_opt.integrator.max_interval = model.rate_schedule.period;
+  const bool multirate = model.rate_schedule.period > 1;
   rk4_opt.integrator.type = IntegratorType::rk4;
   se_opt.integrator.type = IntegratorType::symplectic_euler;
   ie_opt.integrator.type = IntegratorType::implicit_euler;
@@ -205,7 +212,7 @@ int main(int argc, char** argv) {
     std::vector<double> ms;
   };
   enum { force_eval, tangent, rk4_step, rk4_free, rk4_contact, se_step, se_free, ie_step, ie_first, ie_free, health,
-         pair_floor, op_count };
+         pair_floor, multirate_step, op_count };
   // The blocked force loop's memory work alone (detail::pair_loop_floor), one thread.
   const bool floor_timed = is_mls && detail::uses_blocked_loops(model);
   // Everything timed at one thread count: its own State (and pool), force buffers, options.
@@ -271,6 +278,14 @@ int main(int argc, char** argv) {
                      check(solve_contact(model, w.se_opt, timed), "symplectic-Euler contact solve");
                    },
                    [&] { (void)check_health(model, w.se_opt, timed, StepStatus::ok); }, repeats, {}};
+    // The multirate step at the ticks of a period in turn (each its own phase's work).
+    auto multirate_setup = [&, restore, phase = int64_t{0}]() mutable {
+      restore();
+      timed.tick += phase++;
+      std::fill(timed.elastic_update_tick.begin(), timed.elastic_update_tick.end(), timed.tick - 1);
+    };
+    ops[multirate_step] = {multirate_setup, [&] { check(step(model, multirate_opt, timed), "multirate symplectic-Euler step"); },
+                           multirate && c == 1 ? repeats : 0, {}};
     for (Op& op : ops) op.ms.reserve(op.repeats);
     variants.push_back(std::move(v));
   }
@@ -301,6 +316,26 @@ int main(int argc, char** argv) {
   const double force_eval_ms = med(force_eval), tangent_ms = med(tangent), rk4_ms = med(rk4_step), rk4_free_ms = med(rk4_free),
                rk4_contact_ms = med(rk4_contact), se_ms = med(se_step), se_free_ms = med(se_free),
                ie_ms = med(ie_step), ie_first_ms = med(ie_first), ie_free_ms = med(ie_free), health_ms = med(health);
+  const double multirate_ms = multirate ? med(multirate_step) : NAN;
+  // The pair work of the multirate step's ticks: the mean and the largest over the period, of all.
+  double multirate_work_mean = NAN, multirate_work_max = NAN;
+  int multirate_near = 0;  // coarse particles near the pressed tool, which update every tick
+  double multirate_extra = 0;  // the pair work their domains add to a tick, of all
+  if (multirate) {
+    const RateSchedule& rs = model.rate_schedule;
+    restore();
+    std::fill(timed.elastic_update_tick.begin(), timed.elastic_update_tick.end(), timed.tick - 1);
+    check(step(model, multirate_opt, timed), "multirate symplectic-Euler step");
+    multirate_near = static_cast<int>(timed.work.subcycle_near.size());
+    for (int b : timed.work.subcycle_extra)
+      multirate_extra += static_cast<double>(model.blocks[b].slot_end - model.blocks[b].slot_begin) / rs.slots_total;
+    multirate_work_mean = multirate_work_max = 0;
+    for (int64_t slots : rs.slots_at_phase) {
+      const double w = static_cast<double>(slots) / static_cast<double>(rs.slots_total);
+      multirate_work_mean += w / rs.period;
+      multirate_work_max = std::max(multirate_work_max, w);
+    }
+  }
 
   // What the last timed steps did (every repetition does the same).
   restore();
@@ -384,6 +419,14 @@ int main(int argc, char** argv) {
       {"vector_updates_ms", se_free_ms - force_eval_ms},
       {"contact_and_other_ms", se_ms - se_free_ms},
   };
+  if (multirate) {
+    j["multirate_max_interval"] = model.rate_schedule.period;
+    j["multirate_step_ms"] = multirate_ms;
+    j["multirate_pair_work_mean"] = multirate_work_mean;
+    j["multirate_pair_work_max"] = multirate_work_max;
+    j["multirate_near_tool"] = multirate_near;
+    j["multirate_near_tool_pair_work"] = multirate_extra;
+  }
   j["implicit_euler_step_ms"] = ie_ms;
   j["implicit_euler_first_step_ms"] = ie_first_ms;
   j["implicit_euler_dt"] = ie_dt;
@@ -460,6 +503,14 @@ int main(int argc, char** argv) {
     std::printf("  %-34s %10.4f ms\n", "  other", rk4_ms - rk4_free_ms - rk4_contact_ms);
     std::printf("  %-34s %10.4f ms\n", "symplectic-Euler step", se_ms);
     std::printf("  %-34s %10.4f ms\n", "  free motion", se_free_ms);
+    if (multirate) {
+      std::printf("  %-34s %10.4f ms   (max interval %d, over the ticks of its period)\n", "multirate symplectic-Euler step",
+                  multirate_ms, model.rate_schedule.period);
+      std::printf("  %-34s %10.0f %%   of the force blocks' pairs a tick, mean (largest %.0f %%)\n", "  its pair work",
+                  100 * multirate_work_mean, 100 * multirate_work_max);
+      std::printf("  %-34s %10.0f %%   more for the %d coarse particles near the pressed tool (every tick)\n",
+                  "  near the tool", 100 * multirate_extra, multirate_near);
+    }
     std::printf("  %-34s %10.4f ms   (dt %g s, %d CG iterations, %d candidates, %d contacts)\n", "implicit-Euler step",
                 ie_ms, ie_dt, ie_cg_iterations, ie_candidates, ie_contacts);
     std::printf("  %-34s %10.4f ms\n", "  free motion", ie_free_ms);

@@ -10,6 +10,7 @@
 
 #include "core/boundary.h"
 #include "core/consistent_integration.h"
+#include "core/force_blocks.h"
 #include "core/time_step.h"
 #include "core/kernel.h"
 #include "core/material_field.h"
@@ -53,86 +54,6 @@ double first_touch_height(const Points& X, double cx, double cy, double radius, 
     surface = std::max(surface, X(2, i));
   }
   return top;
-}
-
-// The blocked layout of the force loop (Model::blocks, Model::block_slots): the
-// support domains, gradient weights, rest corrections and volumes regrouped four
-// particles at a time, neighbour lists padded to the block's longest.
-void build_force_blocks(Model& m) {
-  constexpr int W = Model::block_width;
-  const int n = m.particle_count;
-  const int block_count = (n + W - 1) / W;
-  m.blocks.assign(block_count, Model::ParticleBlock{});
-  m.block_slots.clear();
-  for (int b = 0; b < block_count; ++b) {
-    Model::ParticleBlock& block = m.blocks[b];
-    int longest = 0;
-    for (int l = 0; l < W; ++l) {
-      const int i = W * b + l;
-      if (i < n) longest = std::max(longest, m.neighbor_offset[i + 1] - m.neighbor_offset[i]);
-    }
-    block.slot_begin = static_cast<int>(m.block_slots.size());
-    block.slot_end = block.slot_begin + longest;
-    m.block_slots.resize(block.slot_end, Model::NeighborSlot{});
-    for (int l = 0; l < W; ++l) {
-      const int i = W * b + l;
-      if (i >= n) {  // padding lane: weightless, its neighbours are particle 0, F = I (stress free, and
-                     // no law meets a singular F there: the vectorised polar decomposition needs det F > 0)
-        block.volume[l] = 0.0;
-        block.lame_lambda[l] = m.lame_lambda;
-        block.lame_mu[l] = m.lame_mu;
-        for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
-        for (int c = 0; c < 3; ++c) block.self_weight[c][l] = 0.0;
-        continue;
-      }
-      block.volume[l] = m.volume[i];
-      block.lame_lambda[l] = m.particle_lambda[i];
-      block.lame_mu[l] = m.particle_mu[i];
-      for (int k = 0; k < 9; ++k) block.rest_correction[k][l] = m.rest_correction[9 * static_cast<size_t>(i) + k];
-      const int count = m.neighbor_offset[i + 1] - m.neighbor_offset[i];
-      for (int s = 0; s < longest; ++s) {
-        Model::NeighborSlot& slot = m.block_slots[block.slot_begin + s];
-        const int a = m.neighbor_offset[i] + s;
-        slot.j[l] = s < count ? m.neighbor_index[a] : i;
-        for (int c = 0; c < 3; ++c) slot.d[c][l] = s < count ? m.gradient_weight(c, a) : 0.0;
-      }
-      for (int c = 0; c < 3; ++c) {
-        double sum = 0;
-        for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) sum += m.gradient_weight(c, a);
-        block.self_weight[c][l] = -sum;
-      }
-    }
-  }
-  if (m.hourglass_weight.empty()) {
-    m.block_hourglass_slots.clear();
-    m.block_hourglass.clear();
-    return;
-  }
-  // Hourglass control's blocked terms (docs/physics.md (1.9a)); zero in padding slots and lanes.
-  m.block_hourglass_slots.assign(m.block_slots.size(), Model::HourglassSlot{});
-  m.block_hourglass.assign(block_count, Model::HourglassBlock{});
-  for (int b = 0; b < block_count; ++b) {
-    const Model::ParticleBlock& block = m.blocks[b];
-    Model::HourglassBlock& hg = m.block_hourglass[b];
-    for (int l = 0; l < W && W * b + l < n; ++l) {
-      const int i = W * b + l;
-      Mat3 H = Mat3::Zero();
-      Vec3 e_sum = Vec3::Zero();
-      for (int a = m.neighbor_offset[i]; a < m.neighbor_offset[i + 1]; ++a) {
-        const double k = m.hourglass_weight[a];
-        const Vec3 X_ij = m.neighbor_rest_offset.col(a);
-        H += k * X_ij * X_ij.transpose();
-        e_sum += k * X_ij;
-        Model::HourglassSlot& slot = m.block_hourglass_slots[block.slot_begin + (a - m.neighbor_offset[i])];
-        slot.k[l] = k;
-        for (int c = 0; c < 3; ++c) slot.e[c][l] = k * X_ij[c];
-        hg.active = hg.active || k != 0;
-      }
-      const int entry[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
-      for (int q = 0; q < 6; ++q) hg.H[q][l] = H(entry[q][0], entry[q][1]);
-      for (int c = 0; c < 3; ++c) hg.e_sum[c][l] = e_sum[c];
-    }
-  }
 }
 
 // Material (Lame parameters from E, nu).
@@ -361,7 +282,7 @@ void build_mls(Model& m, const Scene& scene, const NodeCloud& cloud) {
       }
     }
   }
-  build_force_blocks(m);
+  build_force_blocks(m);  // in particle order (a subcycled model regroups them: core/rate_schedule.h)
 
 }
 
@@ -481,6 +402,19 @@ Model build_model(const Scene& scene, const NodeCloud& cloud) {
   if (scene.distribution.type == DistributionType::mesh && scene.distribution.refine.enabled() &&
       !opt.integrator.allow_unstable_dt && opt.integrator.dt > stable_time_step(m, opt.integrator.type))
     m.spectral_time_step = spectral_time_step(m, opt.integrator.type);
+  if (scene.integrator.max_interval > 1) {
+    if (scene.model != SolidKind::mls)
+      throw SceneError(scene.source, "/integrator/max_interval",
+                       "subcycling applies to the MLS model only (this scene's is " + std::string(to_string(scene.model)) + ")");
+    if (scene.integrator.type != IntegratorType::symplectic_euler)
+      throw SceneError(scene.source, "/integrator/max_interval",
+                       "subcycling applies to the symplectic_euler integrator only (this scene's is " +
+                           std::string(to_string(scene.integrator.type)) + ")");
+    if (scene.integrator.threads > 1)
+      throw SceneError(scene.source, "/integrator/max_interval",
+                       "subcycling runs on one thread: set integrator.threads to 1, or max_interval to 1");
+    build_rate_schedule(m, scene.integrator.max_interval, opt.integrator.dt);
+  }
   check_options(m, opt);
   return m;
 }

@@ -21,6 +21,9 @@ void Checkpoint::restore(State& s) const {
   s.tick = tick;
   s.force_command = force_command;
   s.health.report = {};
+  // The ticks since each particle's last elastic update are the saved state's (multirate
+  // symplectic Euler), counted back from the caller's clock.
+  for (int64_t& last : s.elastic_update_tick) last += tick - saved_.tick;
 }
 
 }  // namespace palpate

@@ -17,8 +17,8 @@ class Checkpoint {
   // Everything carried (positions, velocities, indenter, contact set, health
   // bookkeeping) except the clock and the input: time, tick and the force command
   // stay the caller's (a session's tick keeps running through a recovery, and the
-  // command is what the user last asked for). The restored state's last health
-  // report is cleared.
+  // command is what the user last asked for); the ticks of the particles' last elastic
+  // updates move with the clock. The restored state's last health report is cleared.
   void restore(State& s) const;
   int64_t tick() const { return saved_.tick; }
   const CarriedState& saved() const { return saved_; }

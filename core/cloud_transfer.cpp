@@ -191,6 +191,7 @@ void transfer_state(const CloudTransfer& transfer, const Model& from_model, cons
   to.indenter_contact_force = from.indenter_contact_force;
   to.time = from.time;
   to.tick = from.tick;
+  std::fill(to.elastic_update_tick.begin(), to.elastic_update_tick.end(), from.tick - 1);
   to.health = from.health;
   to.health.inversion_cursor = 0;
 

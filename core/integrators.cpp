@@ -1,8 +1,11 @@
 #include "core/integrators.h"
 
+#include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 
+#include "core/mls_forces.h"
 #include "core/solid.h"
 
 namespace palpate {
@@ -311,6 +314,68 @@ void free_motion_symplectic_euler(const Model& model, const Options& opt, State&
   add_contact_forces(state, w.force);
   MotionSums sums;
   const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), dt, &sums};
+  for_each_acceleration(model, opt, w.force.data(), state.velocity.data(), update, w.threads);
+  sums.write(state.out);
+  tool_free_motion(model, opt, state);
+}
+
+void free_motion_multirate_symplectic_euler(const Model& model, const Options& opt, State& state) {
+  const RateSchedule& s = model.rate_schedule;
+  Workspace& w = state.work;
+  const int n = model.particle_count;
+  const int64_t tick = state.tick;
+  const int p = static_cast<int>(tick % s.period);
+  assert(state.elastic_update_tick.size() == static_cast<size_t>(n) && w.subcycle_block_listed.size() == s.block_ticks.size());
+  // The coarse particles near the tool update at every tick: the blocks of their domains that
+  // the tick's schedule lacks are added to it.
+  w.subcycle_near.clear();
+  w.subcycle_extra.clear();
+  const Vec3 centre = state.indenter_center;
+  for (int i = 0; i < n; ++i) {
+    if (s.interval[i] == 1 || model.fixed[i]) continue;
+    const double reach = model.indenter_radius + kSubcyclingReach * model.support_radius[i];
+    if ((state.position.col(i) - centre).squaredNorm() >= reach * reach) continue;
+    w.subcycle_near.push_back(i);
+    for (int a = s.particle_block_offset[i]; a < s.particle_block_offset[i + 1]; ++a) {
+      const int b = s.particle_block_index[a];
+      if ((s.block_ticks[b] >> p & 1) || w.subcycle_block_listed[b]) continue;
+      w.subcycle_block_listed[b] = 1;
+      w.subcycle_extra.push_back(b);
+    }
+  }
+  for (int b : w.subcycle_extra) w.subcycle_block_listed[b] = 0;
+  const int* blocks = s.block_index.data() + s.block_offset[p];
+  int count = s.block_offset[p + 1] - s.block_offset[p];
+  if (!w.subcycle_extra.empty()) {
+    std::sort(w.subcycle_extra.begin(), w.subcycle_extra.end());
+    w.subcycle_blocks.resize(count + w.subcycle_extra.size());
+    std::merge(blocks, blocks + count, w.subcycle_extra.begin(), w.subcycle_extra.end(), w.subcycle_blocks.begin());
+    blocks = w.subcycle_blocks.data();
+    count = static_cast<int>(w.subcycle_blocks.size());
+  }
+  mls_internal_forces_of_blocks(model, state.position, blocks, count, w.force, w.threads);
+  // (1.21): the particles that update at this tick take their elastic force times the ticks
+  // since their last update; the others none (their sums are partial).
+  const uint8_t* interval = s.interval.data();
+  const uint8_t* phase = s.phase.data();
+  int64_t* last = state.elastic_update_tick.data();
+  double* f = w.force.data();
+  size_t near = 0;
+  for (int i = 0; i < n; ++i) {
+    bool update = (p & (interval[i] - 1)) == phase[i];
+    if (near < w.subcycle_near.size() && w.subcycle_near[near] == i) update = true, ++near;
+    double factor = 0.0;
+    if (update) {
+      factor = static_cast<double>(tick - last[i]);
+      last[i] = tick;
+    }
+    f[3 * i] *= factor;
+    f[3 * i + 1] *= factor;
+    f[3 * i + 2] *= factor;
+  }
+  add_contact_forces(state, w.force);
+  MotionSums sums;
+  const SymplecticEulerUpdate update{state.position.data(), state.velocity.data(), opt.integrator.dt, &sums};
   for_each_acceleration(model, opt, w.force.data(), state.velocity.data(), update, w.threads);
   sums.write(state.out);
   tool_free_motion(model, opt, state);

@@ -42,6 +42,11 @@ void keep_tool_in_workspace(const Model& model, State& state);
 void free_motion_rk4(const Model& model, const Options& opt, State& state);
 // Symplectic (semi-implicit) Euler: v += dt a(x, v); x += dt v.
 void free_motion_symplectic_euler(const Model& model, const Options& opt, State& state);
+// Multirate symplectic Euler (opt.integrator.max_interval > 1, Model::rate_schedule; docs/physics.md
+// (1.21)): at tick t the particles whose phase is t mod k_i, and the coarse ones near the tool,
+// take their elastic force times the ticks since their last update (State::elastic_update_tick),
+// the others none; contact, damping and gravity act on all; then v += dt a; x += dt v.
+void free_motion_multirate_symplectic_euler(const Model& model, const Options& opt, State& state);
 // The step operator of linearly implicit Euler, A = (1 + dt c) M + dt^2 K over the
 // free particles, K the tangent stiffness cached in state.work by linearize_elastic (solid.h).
 // It is also the coupled response of the contact solve of that step.

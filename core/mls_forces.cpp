@@ -53,7 +53,7 @@ double detail::pair_loop_floor(const Model& m, const Points& x, Points& f, Worke
     for (int b = b_begin; b < b_end; ++b) {
       const Block& block = m.blocks[b];
       int i[kLanes];
-      block_particles(b, n, i);
+      block_particles(block, i);
       Mat3Lanes F, vP;
       PALPATE_UNROLL
       for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
@@ -62,7 +62,7 @@ double detail::pair_loop_floor(const Model& m, const Points& x, Points& f, Worke
       PALPATE_UNROLL
       for (int k = 0; k < 9; ++k) vP.m[k] = v * F.m[k];
       scatter_forces<Rows>(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, vP, i,
-                           std::min(kLanes, n - kLanes * b), f_rows);
+                           block.lanes, f_rows);
     }
   });
   return m.neighbor_offset.back() * 39.0 + n * (18.0 + 9.0);
@@ -105,6 +105,16 @@ void mls_internal_forces(const Model& m, const Points& x, Points& f, WorkerThrea
       });
     scatter_in_parallel(m, f.data(), threads, [&](int b_begin, int b_end, double* out) {
       internal_forces_blocked<Law, Columns, volume_term, hourglass>(m, b_begin, b_end, x.data(), out);
+    });
+  });
+}
+
+void mls_internal_forces_of_blocks(const Model& m, const Points& x, const int* blocks, int count, Points& f,
+                                   WorkerThreads& scratch) {
+  assert(use_blocks(m) && "the forces of listed blocks need the blocked layout");
+  with_blocked_variant(m, [&]<class Law, bool volume_term, bool hourglass>() {
+    loop_on_rows(m, scratch, x.data(), f.data(), [&](int, int, const double* x_rows, double* out) {
+      internal_forces_listed<Law, Rows, volume_term, hourglass>(m, blocks, count, x_rows, out);
     });
   });
 }
@@ -230,11 +240,11 @@ double mls_internal_forces_flops(const Model& m, const Points& x) {
     auto gradients = [&](int b, Mat3Lanes& F) {
       const Block& block = m.blocks[b];
       int i[kLanes];
-      block_particles(b, static_cast<int>(n), i);
+      block_particles(block, i);
       PALPATE_UNROLL
       for (int k = 0; k < 9; ++k) F.m[k] = load(block.rest_correction[k]);
       add_gradient<Columns>(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x.data(), i, F);
-      return std::min(kLanes, static_cast<int>(n) - kLanes * b);
+      return block.lanes;
     };
     double polar = 0;
     with_law(m.law, [&]<class Law>() {
@@ -249,8 +259,8 @@ double mls_internal_forces_flops(const Model& m, const Points& x) {
       double hg_pairs = 0, hg_particles = 0;
       for (size_t b = 0; b < m.blocks.size(); ++b)
         if (m.block_hourglass[b].active)
-          for (int l = 0; l < kLanes && kLanes * static_cast<int>(b) + l < m.particle_count; ++l) {
-            const int i = kLanes * static_cast<int>(b) + l;
+          for (int l = 0; l < m.blocks[b].lanes; ++l) {
+            const int i = m.blocks[b].particle[l];
             hg_pairs += m.neighbor_offset[i + 1] - m.neighbor_offset[i];
             hg_particles += 1;
           }

@@ -30,6 +30,13 @@ void mls_internal_forces(const Model& model, const Points& x, Points& f);
 // bit. Other counts differ from it by the order of the sums (round-off).
 void mls_internal_forces(const Model& model, const Points& x, Points& f, WorkerThreads& threads);
 
+// f (3 x n, overwritten) = the forces of the listed force blocks' support domains alone (blocks
+// ascending, Model::blocks; multirate symplectic Euler, core/rate_schedule.h): every member's
+// share of those domains, nothing of the others. On the calling thread, in scratch's rows.
+// Requires the blocked layout.
+void mls_internal_forces_of_blocks(const Model& model, const Points& x, const int* blocks, int count, Points& f,
+                                   WorkerThreads& scratch);
+
 // U(x) = sum_i v_i [ psi(F_i) + k_v/2 (det F_i - 1)^2 ] + hourglass energy, J, psi the law's energy
 // density (St Venant-Kirchhoff: 1/2 E:S).
 double mls_strain_energy(const Model& model, const Points& x);

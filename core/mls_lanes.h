@@ -66,10 +66,11 @@ PALPATE_INLINE void fence(Mat3Lanes& M) {
   for (int k = 0; k < 9; ++k) fence(M.m[k]);
 }
 
-// The particles of block b (padding lanes repeat the last particle).
-PALPATE_INLINE void block_particles(int b, int n, int (&i)[kLanes]) {
+// The particles of a block (padding lanes repeat its last particle).
+template <class Block>
+PALPATE_INLINE void block_particles(const Block& block, int (&i)[kLanes]) {
   PALPATE_UNROLL
-  for (int l = 0; l < kLanes; ++l) i[l] = std::min(kLanes * b + l, n - 1);
+  for (int l = 0; l < kLanes; ++l) i[l] = block.particle[l];
 }
 
 // Entries of a per-particle 3x3 cache (9 x n, column-major per particle) as Lanes.

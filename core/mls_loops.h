@@ -323,21 +323,20 @@ PALPATE_INLINE void scatter_forces(const Block& block, const Slot* slot, const S
   Layout::subtract(f, i, g, lanes);
 }
 
-// The force loop over G blocks at a time: F of each, their stresses v_i P_i, the
-// forces, with hourglass control's terms (1.9a) when hourglass. G = Law::group
-// (2 for the corotational law: its polar iterations interleave).
+// The force loop over G blocks at a time, block_of[0 .. G-1]: F of each, their stresses
+// v_i P_i, the forces, with hourglass control's terms (1.9a) when hourglass.
+// G = Law::group (2 for the corotational law: its polar iterations interleave).
 template <class Law, class Layout, bool volume_term, bool hourglass, int G>
-PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const double* __restrict x,
+PALPATE_INLINE void internal_forces_of_blocks(const Model& m, const int* block_of, const double* __restrict x,
                                               double* __restrict f) {
-  const int n = m.particle_count;
   int i[G][kLanes];
   Mat3Lanes F[G], vP[G];
   Lanes v[G], lambda[G], mu[G];
   [[maybe_unused]] HourglassSums sums[G];
   PALPATE_UNROLL
   for (int g = 0; g < G; ++g) {
-    const Block& block = m.blocks[b0 + g];
-    block_particles(b0 + g, n, i[g]);
+    const Block& block = m.blocks[block_of[g]];
+    block_particles(block, i[g]);
     PALPATE_UNROLL
     for (int k = 0; k < 9; ++k) F[g].m[k] = load(block.rest_correction[k]);  // F_i = C_i + sum_j (x_j - x_i) d_j^T
     add_gradient<Layout, hourglass>(m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end, x, i[g],
@@ -351,14 +350,14 @@ PALPATE_INLINE void internal_forces_of_blocks(const Model& m, int b0, const doub
   for (int g = 0; g < G; ++g) fence(vP[g]);
   PALPATE_UNROLL
   for (int g = 0; g < G; ++g) {
-    const Block& block = m.blocks[b0 + g];
+    const Block& block = m.blocks[block_of[g]];
     [[maybe_unused]] HourglassScatter h{};
     if constexpr (hourglass) {
-      subtract_hourglass_stress(m.block_hourglass[b0 + g], F[g], sums[g], vP[g]);
-      h = {m.block_hourglass_slots.data() + block.slot_begin, &m.block_hourglass[b0 + g], &F[g], x, &sums[g]};
+      subtract_hourglass_stress(m.block_hourglass[block_of[g]], F[g], sums[g], vP[g]);
+      h = {m.block_hourglass_slots.data() + block.slot_begin, &m.block_hourglass[block_of[g]], &F[g], x, &sums[g]};
     }
     scatter_forces<Layout, hourglass>(block, m.block_slots.data() + block.slot_begin, m.block_slots.data() + block.slot_end,
-                              vP[g], i[g], std::min(kLanes, n - kLanes * (b0 + g)), f, h);
+                              vP[g], i[g], block.lanes, f, h);
   }
 }
 
@@ -372,20 +371,45 @@ void internal_forces_blocked(const Model& m, int b_begin, int b_end, const doubl
   int b = b_begin;
   if constexpr (Law::group == 2)
     for (; b + 2 <= b_end; b += 2) {
+      const int pair[2] = {b, b + 1};
       if constexpr (hourglass)
         if (!active(b) && !active(b + 1)) {
-          internal_forces_of_blocks<Law, Layout, volume_term, false, 2>(m, b, x, f);
+          internal_forces_of_blocks<Law, Layout, volume_term, false, 2>(m, pair, x, f);
           continue;
         }
-      internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 2>(m, b, x, f);
+      internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 2>(m, pair, x, f);
     }
   for (; b < b_end; ++b) {
     if constexpr (hourglass)
       if (!active(b)) {
-        internal_forces_of_blocks<Law, Layout, volume_term, false, 1>(m, b, x, f);
+        internal_forces_of_blocks<Law, Layout, volume_term, false, 1>(m, &b, x, f);
         continue;
       }
-    internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 1>(m, b, x, f);
+    internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 1>(m, &b, x, f);
+  }
+}
+
+// The force loop over the listed blocks (ascending, count of them): internal_forces_blocked's
+// per block, a law of group 2 taking the listed blocks two at a time in their order. All blocks
+// listed, the pairs are internal_forces_blocked's, and so are the forces, bit for bit.
+template <class Law, class Layout, bool volume_term, bool hourglass>
+void internal_forces_listed(const Model& m, const int* list, int count, const double* __restrict x,
+                            double* __restrict f) {
+  [[maybe_unused]] auto active = [&](int b) { return m.block_hourglass[b].active; };
+  int k = 0;
+  if constexpr (Law::group == 2)
+    for (; k + 2 <= count; k += 2) {
+      const int* pair = list + k;
+      if (hourglass && (active(pair[0]) || active(pair[1])))
+        internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 2>(m, pair, x, f);
+      else
+        internal_forces_of_blocks<Law, Layout, volume_term, false, 2>(m, pair, x, f);
+    }
+  for (; k < count; ++k) {
+    if (hourglass && active(list[k]))
+      internal_forces_of_blocks<Law, Layout, volume_term, hourglass, 1>(m, list + k, x, f);
+    else
+      internal_forces_of_blocks<Law, Layout, volume_term, false, 1>(m, list + k, x, f);
   }
 }
 
@@ -397,7 +421,6 @@ void internal_forces_blocked(const Model& m, int b_begin, int b_end, const doubl
 template <class Law, class Layout, bool volume_term, bool hourglass, int K>
 void force_differentials_blocked(const Model& m, int b_begin, int b_end, const double* tangent_F,
                                  const double* tangent_law_factor, const double* const* dx, double* const* df) {
-  const int n = m.particle_count;
   for (int b = b_begin; b < b_end; ++b) {
     if constexpr (hourglass)
       if (!m.block_hourglass[b].active) {  // a block without hourglass control: the loop without its terms
@@ -409,7 +432,7 @@ void force_differentials_blocked(const Model& m, int b_begin, int b_end, const d
     const Slot* end = m.block_slots.data() + block.slot_end;
     [[maybe_unused]] const HourglassSlot* hg = hourglass ? m.block_hourglass_slots.data() + block.slot_begin : nullptr;
     int i[kLanes];
-    block_particles(b, n, i);
+    block_particles(block, i);
     Mat3Lanes dF[K] = {};
     [[maybe_unused]] HourglassSums sums[K];
     PALPATE_UNROLL
@@ -426,7 +449,7 @@ void force_differentials_blocked(const Model& m, int b_begin, int b_end, const d
       PALPATE_UNROLL
       for (int q = 0; q < K; ++q) fence(vdP[q]);
     }
-    const int lanes = std::min(kLanes, n - kLanes * b);
+    const int lanes = block.lanes;
     PALPATE_UNROLL
     for (int q = 0; q < K; ++q) {
       [[maybe_unused]] HourglassScatter h{};

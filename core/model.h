@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/hex_fem.h"
+#include "core/rate_schedule.h"
 #include "core/scene.h"
 #include "core/types.h"
 
@@ -41,11 +42,13 @@ struct Model {
   int fixed_count = 0;
   double free_mass = 0.0;                // sum of m_i over the free particles, kg
 
-  // Blocked copy of the support domains for the vectorised force loop (mls_loops.h).
-  // Particles 4b ... 4b+3 form block b (lanes 0..3; lanes >= n of the last block are
-  // padding with zero volume and zero weights). Slot s of a block holds the s-th
-  // neighbour of each of its four particles; shorter neighbour lists are padded to the
-  // block's longest with d = 0 and j = the lane's own particle, which adds nothing.
+  // Blocked copy of the support domains for the vectorised force loop (mls_loops.h,
+  // core/force_blocks.h). Block b holds four particles (lanes 0..3): 4b ... 4b+3, or as a
+  // subcycled model's schedule regroups them (core/rate_schedule.h); the last block's lanes
+  // beyond the particle count are padding with zero volume and zero weights. Slot s of a
+  // block holds the s-th neighbour of each of its four particles; shorter neighbour lists
+  // are padded to the block's longest with d = 0 and j = the lane's own particle, which adds
+  // nothing.
   static constexpr int block_width = 4;
   struct NeighborSlot {
     alignas(32) double d[3][block_width];  // d_j: component c of lane l at d[c][l]
@@ -58,6 +61,8 @@ struct Model {
     double lame_lambda[block_width];                     // particle_lambda of lane l (padding: the matrix's)
     double lame_mu[block_width];                         // particle_mu of lane l
     int slot_begin = 0, slot_end = 0;                    // its slots in block_slots
+    int particle[block_width] = {};                      // lane l's particle (padding: the last lane's)
+    int lanes = 0;                                       // lanes holding a particle (4 but in the last block)
   };
   std::vector<ParticleBlock> blocks;      // ceil(n / 4)
   std::vector<NeighborSlot> block_slots;  // sum over blocks of the longest neighbour list
@@ -87,6 +92,10 @@ struct Model {
   // (grid, jittered, graded, the hex FEM's): the box faces, two triangles per face cell;
   // node_file clouds: none (0 columns).
   Eigen::Matrix<int, 3, Eigen::Dynamic> surface_triangles;
+
+  // Multirate symplectic Euler's schedule (core/rate_schedule.h), built for the scene's
+  // integrator.max_interval (period 1 and empty: one rate).
+  RateSchedule rate_schedule;
 
   // Hexahedral FEM (solid == hex_fem only; particles are the lattice nodes).
   HexMesh hex;

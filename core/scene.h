@@ -202,6 +202,10 @@ struct IntegratorSpec {
   // Threads of the force loops (the caller's and threads - 1 workers, core/thread_pool.h);
   // results are bit-identical between runs for a given count.
   int threads = 1;
+  // Symplectic Euler on an MLS model: the longest interval, in ticks, between a particle's
+  // elastic updates (subcycling, core/rate_schedule.h), a power of two 1 ... 64; 1 updates
+  // every particle every tick. The model's schedule is built for the scene's value.
+  int max_interval = 1;
   // Explicit integrators: a dt above the measured stable envelope (time_step.h) is
   // refused unless the scene opts in.
   bool allow_unstable_dt = false;

@@ -109,7 +109,7 @@ inline constexpr std::string_view kIndenterKeys[] = {"radius", "mass", "position
                                               "guide"};
 inline constexpr std::string_view kContactKeys[] = {"tolerance", "max_iterations"};
 inline constexpr std::string_view kIntegratorKeys[] = {"type",         "dt", "damping", "cg_tolerance", "cg_max_iterations",
-                                                "allow_unstable_dt", "threads"};
+                                                "allow_unstable_dt", "threads", "max_interval"};
 inline constexpr std::string_view kVerifyKeys[] = {"forces", "rest"};
 inline constexpr std::string_view kRestKeys[] = {"velocity_tolerance", "force_tolerance", "window", "max_time"};
 inline constexpr std::string_view kHealthKeys[] = {"enabled", "energy_factor", "max_indenter_speed", "max_penetration",

@@ -317,6 +317,9 @@ void read_integrator(const Reader& r, IntegratorSpec& in) {
   r["cg_max_iterations"].get(in.cg_max_iterations, 1, 1000000);
   r["allow_unstable_dt"].get(in.allow_unstable_dt);
   r["threads"].get(in.threads, 1, kMaxThreads);
+  r["max_interval"].get(in.max_interval, 1, 64);
+  if ((in.max_interval & (in.max_interval - 1)) != 0)
+    r["max_interval"].fail("must be a power of two (1, 2, 4, ... 64), got " + std::to_string(in.max_interval));
 }
 
 void read_health(const Reader& r, HealthSpec& h) {

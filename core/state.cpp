@@ -16,6 +16,7 @@ State make_state(const Model& model, const Options& opt) {
   s.contact_normal_force.reserve(n);
   s.contact_force.resize(3, n);
   s.out.contact_candidate.reserve(n);
+  s.elastic_update_tick.assign(n, s.tick - 1);
 
   // Every integrator's scratch, so that Options::integrator may change between steps.
   Workspace& w = s.work;
@@ -43,6 +44,10 @@ State make_state(const Model& model, const Options& opt) {
   w.members.reserve(all);
   w.guess.reserve(all);
   w.splitting.reserve(4 * all);
+  w.subcycle_near.reserve(all);
+  w.subcycle_extra.reserve(model.blocks.size());
+  w.subcycle_blocks.reserve(model.blocks.size());
+  w.subcycle_block_listed.assign(model.blocks.size(), 0);
   const size_t m = 64;
   w.delassus.reserve(m * m);
   w.solve_buffer.reserve(m * m);

@@ -99,6 +99,10 @@ struct CarriedState {
 
   double time = 0.0;  // s
   int64_t tick = 0;
+  // n: the tick of particle i's last elastic update, of multirate symplectic Euler (integrators.h,
+  // docs/physics.md (1.21)); its next update takes the ticks since. tick - 1 for all at a fresh
+  // or carried-over state.
+  std::vector<int64_t> elastic_update_tick;
 
   HealthMonitor health;
 };
@@ -190,6 +194,10 @@ struct Workspace {
   WorkerThreads threads;
   std::vector<double> splitting;       // 4 m: implicit Euler's splitting iterates (contact.cpp)
   std::vector<int> guess;              // m: the active set pivoting starts from
+  // Multirate symplectic Euler: the coarse particles near the tool this tick (ascending), the
+  // blocks their domains add to the tick's schedule, the tick's blocks with them (ascending).
+  std::vector<int> subcycle_near, subcycle_extra, subcycle_blocks;
+  std::vector<uint8_t> subcycle_block_listed;  // blocks: 1 while listed in subcycle_extra
 };
 
 struct State : CarriedState {

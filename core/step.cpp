@@ -1,6 +1,8 @@
 #include "core/step.h"
 
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 #include "core/contact.h"
 #include "core/health.h"
@@ -11,13 +13,25 @@ namespace palpate {
 StepStatus step(const Model& model, const Options& opt, State& state) {
   StepStatus status = StepStatus::ok;
   use_threads(model, opt, state);
+  const int max_interval = opt.integrator.max_interval;
+  if (max_interval > 1 && (opt.integrator.type != IntegratorType::symplectic_euler ||
+                           model.rate_schedule.period != max_interval || opt.integrator.threads != 1 ||
+                           opt.integrator.dt > model.rate_schedule.dt))
+    throw std::invalid_argument(
+        "integrator.max_interval " + std::to_string(max_interval) +
+        " needs symplectic Euler on one thread, at most the dt and a model whose schedule was built for it (the "
+        "scene's integrator: this model's schedule has max_interval " + std::to_string(model.rate_schedule.period) +
+        " and dt " + std::to_string(model.rate_schedule.dt) + " s)");
   switch (opt.integrator.type) {
     case IntegratorType::rk4:
       free_motion_rk4(model, opt, state);
       status = solve_contact(model, opt, state);
       break;
     case IntegratorType::symplectic_euler:
-      free_motion_symplectic_euler(model, opt, state);
+      if (opt.integrator.max_interval > 1)
+        free_motion_multirate_symplectic_euler(model, opt, state);
+      else
+        free_motion_symplectic_euler(model, opt, state);
       status = solve_contact(model, opt, state);
       break;
     case IntegratorType::implicit_euler: {

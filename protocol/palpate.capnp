@@ -192,6 +192,7 @@ struct Integrator {
   cgMaxIterations @4 :Int32 = 1000 $Json.name("cg_max_iterations"); # [1, 1e6]
   allowUnstableDt @5 :Bool = false $Json.name("allow_unstable_dt");  # skip the stable-envelope check
   threads @6 :Int32 = 1;                                          # [1, 64], threads of the force loops
+  maxInterval @7 :Int32 = 1 $Json.name("max_interval");           # [1, 64], ticks, a power of two: subcycling (1 = off)
 }
 struct Health {                  # per-step health checks (core/health.h, docs/scene-format.md)
   enabled @0 :Bool = true;

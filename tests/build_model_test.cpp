@@ -93,7 +93,10 @@ const fs::path kFollowScene = fs::path(PALPATE_SOURCE_DIR) / "scenes" / "palpati
 // guide (the Hertz experiment), with mls.mass_floor = beta (and integrator.damping = damping,
 // 1/s, when given).
 test::Setup at_site(double x, double y, double beta, std::optional<double> damping = std::nullopt) {
-  SceneOverrides overrides = {{"mls.mass_floor", std::to_string(beta)}, {"indenter.guide", "\"vertical\""}};
+  // One rate: the subcycled scene's blocks follow its masses (core/rate_schedule.h), and the
+  // forces are compared bit for bit below.
+  SceneOverrides overrides = {{"mls.mass_floor", std::to_string(beta)}, {"indenter.guide", "\"vertical\""},
+                              {"integrator.max_interval", "1"}};
   if (damping) overrides.emplace_back("integrator.damping", std::to_string(*damping));
   Scene scene = load_scene(kFollowScene, overrides);
   scene.indenter.position_given = true;

@@ -173,6 +173,7 @@ const Field kFields[] = {
     SCENE_FIELD("/integrator/cg_max_iterations", integrator.cg_max_iterations, "500"),
     SCENE_FIELD("/integrator/allow_unstable_dt", integrator.allow_unstable_dt, "true"),
     SCENE_FIELD("/integrator/threads", integrator.threads, "2"),
+    SCENE_FIELD("/integrator/max_interval", integrator.max_interval, "4"),
     SCENE_FIELD("/gravity", gravity, "[0, 0, -9.81]"),
     SCENE_FIELD("/verify/forces", verify.forces, "[10, 50]"),
     SCENE_FIELD("/verify/rest/velocity_tolerance", verify.rest.velocity_tolerance, "1e-3"),
@@ -207,7 +208,7 @@ const Field kFields[] = {
       s.indenter;
   [[maybe_unused]] const auto& [tolerance, max_iterations] = s.contact;
   [[maybe_unused]] const auto& [integrator_type, dt, damping, cg_tolerance, cg_max_iterations, allow_unstable_dt,
-                                threads] =
+                                threads, max_interval] =
       s.integrator;
   [[maybe_unused]] const auto& [forces, rest] = s.verify;
   [[maybe_unused]] const auto& [velocity_tolerance, force_tolerance, window, max_time] = s.verify.rest;
