@@ -152,7 +152,6 @@ void build_rate_schedule(Model& m, int max_interval, double dt, double safety) {
     s.particle_block_offset.push_back(static_cast<int>(s.particle_block_index.size()));
   }
   s.block_offset.assign(1, 0);
-  s.particle_offset.assign(1, 0);
   s.slots_at_phase.assign(s.period, 0);
   for (int b = 0; b < blocks; ++b) s.slots_total += m.blocks[b].slot_end - m.blocks[b].slot_begin;
   for (int p = 0; p < s.period; ++p) {
@@ -161,10 +160,7 @@ void build_rate_schedule(Model& m, int max_interval, double dt, double safety) {
         s.block_index.push_back(b);
         s.slots_at_phase[p] += m.blocks[b].slot_end - m.blocks[b].slot_begin;
       }
-    for (int i = 0; i < n; ++i)
-      if (ticks[i] >> p & 1) s.particle_index.push_back(i);
     s.block_offset.push_back(static_cast<int>(s.block_index.size()));
-    s.particle_offset.push_back(static_cast<int>(s.particle_index.size()));
   }
 }
 

@@ -37,9 +37,8 @@ struct RateSchedule {
   std::vector<uint8_t> interval;  // n: k_i, ticks between particle i's elastic updates (power of 2)
   std::vector<uint8_t> phase;     // n: phi_i < k_i; i updates at the ticks t = phi_i (mod k_i)
   // CSR over the period's phases p = t mod period: the blocks a tick of phase p evaluates
-  // (ascending), and the free particles that update at it (ascending).
-  std::vector<int> block_offset, block_index;        // period + 1, sum of blocks
-  std::vector<int> particle_offset, particle_index;  // period + 1, sum of particles
+  // (ascending). Which particles update at it follows from interval and phase.
+  std::vector<int> block_offset, block_index;  // period + 1, sum of blocks
   // The same as bits: bit p of block_ticks[b] set when a tick of phase p evaluates block b.
   std::vector<uint64_t> block_ticks;
   // CSR over the particles: the blocks whose support domains hold particle i (ascending), for
