@@ -66,7 +66,7 @@ same run, interleaved); prints medians.
   --json            print one JSON object instead of the table
 With the scene's integrator.max_interval above 1 (--set integrator.max_interval=8), also
 times the multirate symplectic-Euler step (core/rate_schedule.h) over a period of
-ticks, and prints the pair work its ticks evaluate.
+ticks (on N threads too with --threads N), and prints the pair work its ticks evaluate.
 )";
 
 using cli::median;
@@ -222,7 +222,7 @@ int main(int argc, char** argv) {
     WorkerThreads force_threads;
     Points f, df;
     Workspace linearized;
-    Options rk4_opt, se_opt, ie_opt;
+    Options rk4_opt, se_opt, ie_opt, multirate_opt;
     std::optional<State> fresh;  // the fresh State of the first implicit-Euler step
     std::vector<Op> ops;
   };
@@ -235,7 +235,8 @@ int main(int argc, char** argv) {
     v->rk4_opt = rk4_opt;
     v->se_opt = se_opt;
     v->ie_opt = ie_opt;
-    for (Options* o : {&v->rk4_opt, &v->se_opt, &v->ie_opt}) o->integrator.threads = c;
+    v->multirate_opt = multirate_opt;
+    for (Options* o : {&v->rk4_opt, &v->se_opt, &v->ie_opt, &v->multirate_opt}) o->integrator.threads = c;
     v->timed = make_state(model, v->rk4_opt);  // its pool: c threads
     v->force_threads.resize(c, n);
     v->f.resize(3, n);
@@ -284,8 +285,8 @@ int main(int argc, char** argv) {
       timed.tick += phase++;
       std::fill(timed.elastic_update_tick.begin(), timed.elastic_update_tick.end(), timed.tick - 1);
     };
-    ops[multirate_step] = {multirate_setup, [&] { check(step(model, multirate_opt, timed), "multirate symplectic-Euler step"); },
-                           multirate && c == 1 ? repeats : 0, {}};
+    ops[multirate_step] = {multirate_setup, [&] { check(step(model, w.multirate_opt, timed), "multirate symplectic-Euler step"); },
+                           multirate ? repeats : 0, {}};
     for (Op& op : ops) op.ms.reserve(op.repeats);
     variants.push_back(std::move(v));
   }
@@ -451,13 +452,15 @@ int main(int argc, char** argv) {
                                 {"force_differential_ms", "tangent K dx"},
                                 {"rk4_step_ms", "RK4 step"},
                                 {"symplectic_euler_step_ms", "symplectic-Euler step"},
-                                {"implicit_euler_step_ms", "implicit-Euler step"}};
-  const int compared_op[] = {force_eval, tangent, rk4_step, se_step, ie_step};
+                                {"implicit_euler_step_ms", "implicit-Euler step"},
+                                {"multirate_step_ms", "multirate symplectic-Euler step"}};
+  const int compared_op[] = {force_eval, tangent, rk4_step, se_step, ie_step, multirate_step};
+  const int compared = multirate ? 6 : 5;  // the multirate step where the model has a schedule
   if (variants.size() > 1) {
     const Variant& v = *variants[1];
     nlohmann::json t;
     t["threads"] = v.threads;
-    for (int k = 0; k < 5; ++k) {
+    for (int k = 0; k < compared; ++k) {
       const double ms = median(v.ops[compared_op[k]].ms);
       t[kCompared[k][0]] = ms;
       t[std::string(kCompared[k][0]).replace(std::string(kCompared[k][0]).size() - 3, 3, "_speedup")] =
@@ -527,7 +530,7 @@ int main(int argc, char** argv) {
       std::printf("\non %d threads (integrator.threads = %d; the same repetitions, interleaved with the above)\n\n",
                   v.threads, v.threads);
       std::printf("  %-34s %10s %10s %9s\n", "", "1 thread", "threads", "speed-up");
-      for (int k = 0; k < 5; ++k) {
+      for (int k = 0; k < compared; ++k) {
         const double one = median(ops[compared_op[k]].ms), many = median(v.ops[compared_op[k]].ms);
         std::printf("  %-34s %7.4f ms %7.4f ms %8.2fx\n", kCompared[k][1], one, many, one / many);
       }

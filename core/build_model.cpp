@@ -410,9 +410,6 @@ Model build_model(const Scene& scene, const NodeCloud& cloud) {
       throw SceneError(scene.source, "/integrator/max_interval",
                        "subcycling applies to the symplectic_euler integrator only (this scene's is " +
                            std::string(to_string(scene.integrator.type)) + ")");
-    if (scene.integrator.threads > 1)
-      throw SceneError(scene.source, "/integrator/max_interval",
-                       "subcycling runs on one thread: set integrator.threads to 1, or max_interval to 1");
     build_rate_schedule(m, scene.integrator.max_interval, opt.integrator.dt);
   }
   check_options(m, opt);

@@ -110,12 +110,19 @@ void mls_internal_forces(const Model& m, const Points& x, Points& f, WorkerThrea
 }
 
 void mls_internal_forces_of_blocks(const Model& m, const Points& x, const int* blocks, int count, Points& f,
-                                   WorkerThreads& scratch) {
+                                   WorkerThreads& threads) {
   assert(use_blocks(m) && "the forces of listed blocks need the blocked layout");
   with_blocked_variant(m, [&]<class Law, bool volume_term, bool hourglass>() {
-    loop_on_rows(m, scratch, x.data(), f.data(), [&](int, int, const double* x_rows, double* out) {
-      internal_forces_listed<Law, Rows, volume_term, hourglass>(m, blocks, count, x_rows, out);
-    });
+    if (threads.count() == 1)
+      return loop_on_rows(m, threads, x.data(), f.data(), [&](int, int, const double* x_rows, double* out) {
+        internal_forces_listed<Law, Rows, volume_term, hourglass>(m, blocks, count, x_rows, out);
+      });
+    scatter_in_parallel(
+        m, f.data(), threads,
+        [&](int k_begin, int k_end, double* out) {
+          internal_forces_listed<Law, Columns, volume_term, hourglass>(m, blocks + k_begin, k_end - k_begin, x.data(), out);
+        },
+        blocks, count);
   });
 }
 

@@ -32,10 +32,12 @@ void mls_internal_forces(const Model& model, const Points& x, Points& f, WorkerT
 
 // f (3 x n, overwritten) = the forces of the listed force blocks' support domains alone (blocks
 // ascending, Model::blocks; multirate symplectic Euler, core/rate_schedule.h): every member's
-// share of those domains, nothing of the others. On the calling thread, in scratch's rows.
-// Requires the blocked layout.
+// share of those domains, nothing of the others. Requires the blocked layout. On threads as
+// mls_internal_forces above, the list split into ranges of about equal work (the split a
+// function of the model, the list and the count, so bit-identical between runs); all blocks
+// listed, the forces are mls_internal_forces' bit for bit, on any count of threads.
 void mls_internal_forces_of_blocks(const Model& model, const Points& x, const int* blocks, int count, Points& f,
-                                   WorkerThreads& scratch);
+                                   WorkerThreads& threads);
 
 // U(x) = sum_i v_i [ psi(F_i) + k_v/2 (det F_i - 1)^2 ] + hourglass energy, J, psi the law's energy
 // density (St Venant-Kirchhoff: 1/2 E:S).

@@ -487,28 +487,31 @@ inline bool use_blocks(const Model& m) {
                                          m.block_hourglass_slots.size() == m.block_slots.size()));
 }
 
-// The block ranges of a split of the blocked loops over T threads: thread t takes blocks
-// [bounds[t], bounds[t + 1]), the ranges of about equal work (neighbour slots + a per-block
-// cost of the law's stress, in slot units), every bound but the last even (the corotational
-// loop's pairs stay whole). Depends on the model and T only.
-inline void split_blocks(const Model& m, int T, int* bounds) {
-  const int blocks = static_cast<int>(m.blocks.size());
+// The ranges of a split of the blocked loops over T threads: thread t takes the blocks at
+// positions [bounds[t], bounds[t + 1]) of the list (list[k]; all blocks in order, k itself,
+// when list is null), the ranges of about equal work (neighbour slots + a per-block cost of
+// the law's stress, in slot units), every bound but the last even (the corotational loop's
+// pairs stay whole). Depends on the model, the list and T only.
+inline void split_blocks(const Model& m, const int* list, int count, int T, int* bounds) {
   const int64_t per_block = with_law(m.law, []<class Law>() { return int64_t{Law::block_cost}; });
-  auto cost = [&](int b) { return m.blocks[b].slot_end - m.blocks[b].slot_begin + per_block; };
+  auto cost = [&](int k) {
+    const Block& block = m.blocks[list ? list[k] : k];
+    return block.slot_end - block.slot_begin + per_block;
+  };
   int64_t total = 0;
-  for (int b = 0; b < blocks; ++b) total += cost(b);
+  for (int k = 0; k < count; ++k) total += cost(k);
   bounds[0] = 0;
-  int b = 0;
+  int k = 0;
   int64_t done = 0;
   for (int t = 1; t < T; ++t) {
     const int64_t target = total * t / T;
-    while (b + 2 <= blocks && done + cost(b) + cost(b + 1) <= target) {
-      done += cost(b) + cost(b + 1);
-      b += 2;
+    while (k + 2 <= count && done + cost(k) + cost(k + 1) <= target) {
+      done += cost(k) + cost(k + 1);
+      k += 2;
     }
-    bounds[t] = b;
+    bounds[t] = k;
   }
-  bounds[T] = blocks;
+  bounds[T] = count;
 }
 
 // One thread: x (3 x n) to padded rows in the scratch, loop(0, blocks, x_rows, f_rows) -- a
@@ -526,17 +529,19 @@ void loop_on_rows(const Model& m, WorkerThreads& scratch, const double* x, doubl
   from_rows(f_rows, n, f);
 }
 
-// Runs loop(b_begin, b_end, out) -- a blocked loop on Columns that adds the forces of blocks
-// [b_begin, b_end) into out (3 x n) -- on the pool's threads over split_blocks' ranges,
+// Runs loop(k_begin, k_end, out) -- a blocked loop on Columns that adds the forces of the
+// blocks at positions [k_begin, k_end) of the list (list[k], or all blocks when list is null:
+// block k) into out (3 x n) -- on the pool's threads over split_blocks' ranges,
 // thread 0 into f, thread t > 0 into its own zeroed buffer of the scratch; then adds the
 // buffers into f in the order t = 1, 2, ..., each thread over its share of the coordinates.
 template <class Loop>
-void scatter_in_parallel(const Model& m, double* f, WorkerThreads& threads, const Loop& loop) {
+void scatter_in_parallel(const Model& m, double* f, WorkerThreads& threads, const Loop& loop, const int* list = nullptr,
+                         int count = -1) {
   const int T = threads.count(), n = m.particle_count;
   const size_t stride = kRow * static_cast<size_t>(n);  // the scratch's buffers (3 n used)
   double* partial = threads.row_buffers(T - 1, n);
   int bounds[kMaxThreads + 1];
-  split_blocks(m, T, bounds);
+  split_blocks(m, list, list ? count : static_cast<int>(m.blocks.size()), T, bounds);
   threads.pool->run([&](int t) {
     double* out = t == 0 ? f : partial + (t - 1) * stride;
     std::fill(out, out + 3 * static_cast<ptrdiff_t>(n), 0.0);

@@ -15,11 +15,11 @@ StepStatus step(const Model& model, const Options& opt, State& state) {
   use_threads(model, opt, state);
   const int max_interval = opt.integrator.max_interval;
   if (max_interval > 1 && (opt.integrator.type != IntegratorType::symplectic_euler ||
-                           model.rate_schedule.period != max_interval || opt.integrator.threads != 1 ||
+                           model.rate_schedule.period != max_interval ||
                            opt.integrator.dt > model.rate_schedule.dt))
     throw std::invalid_argument(
         "integrator.max_interval " + std::to_string(max_interval) +
-        " needs symplectic Euler on one thread, at most the dt and a model whose schedule was built for it (the "
+        " needs symplectic Euler, at most the dt and a model whose schedule was built for it (the "
         "scene's integrator: this model's schedule has max_interval " + std::to_string(model.rate_schedule.period) +
         " and dt " + std::to_string(model.rate_schedule.dt) + " s)");
   switch (opt.integrator.type) {
